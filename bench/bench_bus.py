@@ -1,0 +1,224 @@
+"""Bus benchmark: our layer beside raw zenoh-python, measured in the same run.
+
+Prints one markdown table. Latency is half the round trip between two processes through
+one router on loopback (no clock comparison between processes needed).
+
+    python bench/bench_bus.py [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import zenoh
+
+from asibot import messages as m
+from asibot.bus import Bus, client_config
+from asibot.recorder import RecorderService
+from asibot.testing import router
+
+ECHO = r"""
+import sys, threading, zenoh
+from asibot import messages as m
+from asibot.bus import Bus, client_config
+mode = sys.argv[1]
+if mode == "ours":
+    bus = Bus("echo")
+    pub = bus.publisher("bench/pong", m.RgbImage, express=True)
+    bus.subscribe("bench/ping", m.RgbImage, pub.put)
+    bus.serve("bench/rpc", lambda req: {"n": req.get("n")})
+else:
+    s = zenoh.open(client_config(sys.argv[2]))
+    pub = s.declare_publisher("bench/pong", express=True)
+    sub = s.declare_subscriber("bench/ping", lambda sample: pub.put(sample.payload))
+    def on_query(q):
+        with q:
+            q.reply("bench/rpc", q.payload)
+    qs = s.declare_queryable("bench/rpc", on_query)
+print("READY", flush=True)
+threading.Event().wait()
+"""
+
+FLOOD = r"""
+import sys, time
+from asibot import messages as m
+from asibot.bus import Bus
+n = int(sys.argv[1])
+bus = Bus("flood")
+pub = bus.publisher("bench/flood", m.Battery, block=True)
+time.sleep(0.5)
+print("GO", flush=True)
+for i in range(n):
+    pub.put(m.Battery(volts=float(i)))
+print("SENT", flush=True)
+time.sleep(2)
+"""
+
+
+def spawn(code: str, *args: str) -> subprocess.Popen:
+    p = subprocess.Popen([sys.executable, "-c", code, *args], stdout=subprocess.PIPE, text=True)
+    return p
+
+
+def pct(xs: list[float], q: float) -> float:
+    return float(np.percentile(np.asarray(xs), q))
+
+
+def warm_up(got: threading.Event, send) -> None:
+    """Ping until the echo answers: the route through the router exists from then on."""
+    for _ in range(100):
+        got.clear()
+        send()
+        if got.wait(0.1):
+            return
+    raise RuntimeError("the echo process never answered")
+
+
+def pubsub_ours(size: int, n: int) -> list[float]:
+    bus = Bus("bench")
+    got = threading.Event()
+    bus.subscribe("bench/pong", m.RgbImage, lambda msg: got.set())
+    pub = bus.publisher("bench/ping", m.RgbImage, express=True)
+    payload = bytes(size)
+    out = []
+    warm_up(got, lambda: pub.put(m.RgbImage(jpeg=payload, width=0, height=0)))
+    for i in range(n + 20):
+        got.clear()
+        t = time.perf_counter()
+        pub.put(m.RgbImage(jpeg=payload, width=0, height=0))
+        if not got.wait(2):
+            raise RuntimeError("lost a ping")
+        if i >= 20:
+            out.append((time.perf_counter() - t) / 2)
+    bus.close()
+    return out
+
+
+def pubsub_raw(endpoint: str, size: int, n: int) -> list[float]:
+    s = zenoh.open(client_config(endpoint))
+    got = threading.Event()
+    sub = s.declare_subscriber("bench/pong", lambda sample: got.set())
+    pub = s.declare_publisher("bench/ping", express=True)
+    payload = bytes(size)
+    out = []
+    warm_up(got, lambda: pub.put(payload))
+    for i in range(n + 20):
+        got.clear()
+        t = time.perf_counter()
+        pub.put(payload)
+        if not got.wait(2):
+            raise RuntimeError("lost a ping")
+        if i >= 20:
+            out.append((time.perf_counter() - t) / 2)
+    sub.undeclare()
+    s.close()
+    return out
+
+
+def rpc_ours(n: int) -> list[float]:
+    with Bus("bench") as bus:
+        out = []
+        for i in range(n + 20):
+            t = time.perf_counter()
+            bus.call("bench/rpc", {"n": i}, timeout=2)
+            if i >= 20:
+                out.append(time.perf_counter() - t)
+        return out
+
+
+def rpc_raw(endpoint: str, n: int) -> list[float]:
+    s = zenoh.open(client_config(endpoint))
+    out = []
+    payload = m.pack({"n": 1})
+    for i in range(n + 20):
+        t = time.perf_counter()
+        replies = list(s.get("bench/rpc", payload=payload, timeout=2))
+        assert replies and replies[0].ok is not None
+        if i >= 20:
+            out.append(time.perf_counter() - t)
+    s.close()
+    return out
+
+
+def recorder_rate(n: int) -> tuple[float, int]:
+    """Messages per second the recorder service writes to MCAP, fed by another process."""
+    with tempfile.TemporaryDirectory() as d, Bus("recorder") as bus:
+        svc = RecorderService(bus, Path(d))
+        flood = spawn(FLOOD, str(n))
+        assert flood.stdout.readline().strip() == "GO"
+        t0 = time.perf_counter()
+        last, still = -1, 0
+        while svc.recorder.count < n and still < 300:
+            time.sleep(0.01)
+            still = still + 1 if svc.recorder.count == last else 0
+            last = svc.recorder.count
+        elapsed = time.perf_counter() - t0
+        written = svc.recorder.count
+        svc.close()
+        flood.kill()
+        return written / elapsed, n - written
+
+
+def raw_receive_rate(endpoint: str, n: int) -> float:
+    s = zenoh.open(client_config(endpoint))
+    count = [0]
+    done = threading.Event()
+
+    def cb(sample):
+        count[0] += 1
+        if count[0] >= n:
+            done.set()
+    sub = s.declare_subscriber("bench/flood", cb)
+    flood = spawn(FLOOD, str(n))
+    assert flood.stdout.readline().strip() == "GO"
+    t0 = time.perf_counter()
+    done.wait(60)
+    elapsed = time.perf_counter() - t0
+    sub.undeclare()
+    s.close()
+    flood.kill()
+    return count[0] / elapsed
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true", help="fewer samples (CI smoke run)")
+    args = ap.parse_args()
+    n_small, n_big, n_rpc, n_flood = (100, 10, 100, 20000) if args.quick else (1000, 50, 1000, 200000)
+    rows = []
+    with router() as endpoint:
+        for mode in ("ours", "raw"):
+            p = spawn(ECHO, mode, endpoint)
+            assert p.stdout.readline().strip() == "READY"
+            for size, n, label in ((64, n_small, "64 B"), (1024, n_small, "1 KiB"), (1 << 20, n_big, "1 MiB")):
+                lat = pubsub_ours(size, n) if mode == "ours" else pubsub_raw(endpoint, size, n)
+                rows.append((f"pub/sub latency {label}", mode, pct(lat, 50) * 1e6, pct(lat, 99) * 1e6))
+            rtt = rpc_ours(n_rpc) if mode == "ours" else rpc_raw(endpoint, n_rpc)
+            rows.append(("RPC round trip", mode, pct(rtt, 50) * 1e6, pct(rtt, 99) * 1e6))
+            p.kill()
+            p.wait()
+        rate, dropped = recorder_rate(n_flood)
+        raw_rate = raw_receive_rate(endpoint, n_flood)
+
+    print("| what | value | unit | raw zenoh | ratio | budget |")
+    print("|---|---|---|---|---|---|")
+    by = {(w, mode): (p50, p99) for w, mode, p50, p99 in rows}
+    for what in dict.fromkeys(w for w, *_ in rows):
+        (o50, o99), (r50, r99) = by[(what, "ours")], by[(what, "raw")]
+        budget = "p50 <= 1000, p99 <= 5000 (command path)" if "64 B" in what or "RPC" in what else ""
+        print(f"| {what} p50 | {o50:.0f} | us | {r50:.0f} | {o50 / r50:.2f} | {budget} |")
+        print(f"| {what} p99 | {o99:.0f} | us | {r99:.0f} | {o99 / r99:.2f} | |")
+    print(f"| recorder sustained (bus -> MCAP, {n_flood} msgs) | {rate:.0f} | msg/s | {raw_rate:.0f} (receive only) "
+          f"| {rate / raw_rate:.2f} | >= 100000 |")
+    print(f"| recorder drops | {dropped} | msgs | | | 0 |")
+
+
+if __name__ == "__main__":
+    main()

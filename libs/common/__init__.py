@@ -1,0 +1,1 @@
+"""asibot: an assistive robot stack on Zenoh. This package is libs/common."""

@@ -1,0 +1,216 @@
+"""The `asibot` command: up, status, router, replay, recordings."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+from asibot import keys
+from asibot.bus import DEFAULT_ROUTER, ROUTER_ENV, Bus, open_router, router_endpoint
+from asibot.errors import AsibotError
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+
+
+def _stop_on_signals() -> threading.Event:
+    stop = threading.Event()
+
+    def handler(signum, frame):
+        if stop.is_set():
+            os._exit(130)
+        stop.set()
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)
+    return stop
+
+
+def _compose_path(explicit: str | None) -> Path:
+    if explicit:
+        return Path(explicit)
+    env = os.environ.get("ASIBOT_COMPOSE")
+    if env:
+        return Path(env)
+    here = Path("compose.yaml")
+    return here if here.exists() else REPO_ROOT / "compose.yaml"
+
+
+# ---------------------------------------------------------------- router
+def cmd_router(args: argparse.Namespace) -> int:
+    endpoint = args.listen or os.environ.get("ASIBOT_ROUTER_LISTEN") or router_endpoint()
+    stop = _stop_on_signals()
+    session = open_router(endpoint)
+    # The router announces itself like any service, so `asibot status` shows it.
+    token = session.liveliness().declare_token(keys.service("router", "main"))
+    print(f"router listening on {endpoint}", flush=True)
+    stop.wait()
+    token.undeclare()
+    session.close()
+    return 0
+
+
+# ---------------------------------------------------------------- up
+def cmd_up(args: argparse.Namespace) -> int:
+    from asibot import compose
+    from asibot.launcher import Supervisor, wait_for_port
+
+    path = _compose_path(args.file)
+    services = compose.select(compose.load(path), args.profile, args.only)
+    endpoint = router_endpoint()
+    if wait_for_port(endpoint, 0.2):
+        print(f"Something already listens on {endpoint}: is another `asibot up` running? "
+              f"See `asibot status`, or set {ROUTER_ENV} to another port.", file=sys.stderr)
+        return 1
+    stop = _stop_on_signals()
+    sup = Supervisor(services, endpoint, root=path.resolve().parent)
+    names = ", ".join(s.name for s in services)
+    sup.say("asibot", f"profile {args.profile}: {names}")
+    sup.say("asibot", f"router {endpoint}; recordings in {path.resolve().parent / 'recordings'}; Ctrl-C stops")
+
+    def on_event(name: str, what: str) -> None:
+        spec = next(s for s in services if s.name == name)
+        if what == "started" and spec.url:
+            def announce() -> None:
+                port = spec.url.rsplit(":", 1)[-1].split("/")[0]
+                if wait_for_port(f"tcp/127.0.0.1:{port}", 30.0):
+                    sup.say("asibot", f"web UI ready: open {spec.url}")
+            threading.Thread(target=announce, daemon=True).start()
+
+    sup.on_event = on_event
+    sup.run(stop)
+    sup.say("asibot", "stopped")
+    return 0
+
+
+# ---------------------------------------------------------------- status
+def cmd_status(args: argparse.Namespace) -> int:
+    try:
+        bus = Bus("status", wait=args.wait)
+    except AsibotError as exc:
+        print(exc, file=sys.stderr)
+        return 1
+    with bus:
+        health: dict[str, dict] = {}
+        if args.health:
+            from asibot.messages import Health
+            bus.subscribe("health/**", Health, lambda k, h: health.__setitem__(k, h), with_key=True)
+            time.sleep(2.2)
+        alive = bus.alive(keys.ALL_SERVICES)
+    if not alive:
+        print(f"No services are running on {bus.endpoint}.")
+        return 1
+    rows = [keys.parse_service(k) for k in alive]
+    w = max(len(s) for s, _ in rows)
+    print(f"{'SERVICE':<{w}}  INSTANCE")
+    for service, instance in rows:
+        line = f"{service:<{w}}  {instance}"
+        h = health.get(keys.health(service, instance))
+        if h:
+            line += f"  pid {h.pid}  up {h.uptime:.0f} s  rejected {h.rejected}"
+        print(line)
+    return 0
+
+
+# ---------------------------------------------------------------- recordings
+def cmd_recordings(args: argparse.Namespace) -> int:
+    from asibot.recordings import list_recordings
+
+    found = list_recordings(args.dir)
+    if not found:
+        print(f"No recordings in {args.dir}/ yet: `asibot up` writes one per session.")
+        return 0
+    print(f"{'FILE':<40} {'DURATION':>9} {'MESSAGES':>9} {'TOPICS':>6}  NOTE")
+    for s in found:
+        note = ("not an MCAP file" if s.unreadable else
+                "" if s.complete else "recovered (writer did not finish)")
+        print(f"{s.path.name:<40} {s.duration:>8.1f}s {s.messages:>9} {len(s.counts):>6}  {note}")
+        if args.verbose:
+            for key, n in sorted(s.counts.items()):
+                print(f"    {key:<60} {n:>8}  {s.types.get(key, '')}")
+    return 0
+
+
+# ---------------------------------------------------------------- replay
+def cmd_replay(args: argparse.Namespace) -> int:
+    from asibot.recordings import NotARecording, check_recording
+    from asibot.replay import DEFAULT_EXCLUDE, replay
+
+    if not Path(args.file).exists():
+        print(f"{args.file}: no such recording (see `asibot recordings`)", file=sys.stderr)
+        return 1
+    try:
+        check_recording(args.file)
+    except NotARecording as exc:
+        print(exc, file=sys.stderr)
+        return 1
+    speed = None if args.fast else args.speed
+    stop = _stop_on_signals()
+    try:
+        bus = Bus("replay", wait=args.wait)
+    except AsibotError as exc:
+        print(exc, file=sys.stderr)
+        return 1
+    with bus:
+        n = replay(args.file, bus.put_raw, speed=speed, only=args.only,
+                   exclude=list(DEFAULT_EXCLUDE) + args.exclude, stop=stop)
+    print(f"replayed {n} messages from {args.file}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="asibot", description="assistive robot stack")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    up = sub.add_parser("up", help="start the router and a profile's services as local processes")
+    up.add_argument("--profile", default="sim", choices=["sim", "emulated", "real"])
+    up.add_argument("--only", nargs="+", metavar="NAME", help="start only these services (and their dependencies)")
+    up.add_argument("--file", help="compose file (default: ./compose.yaml)")
+    up.set_defaults(func=cmd_up)
+
+    st = sub.add_parser("status", help="list the running services")
+    st.add_argument("--health", action="store_true", help="also wait for one health report of each")
+    st.add_argument("--wait", type=float, default=2.0, help="seconds to wait for the router")
+    st.set_defaults(func=cmd_status)
+
+    r = sub.add_parser("router", help="run the Zenoh router")
+    r.add_argument("--listen", help=f"endpoint (default: $ASIBOT_ROUTER_LISTEN, ${ROUTER_ENV}, {DEFAULT_ROUTER})")
+    r.set_defaults(func=cmd_router)
+
+    rp = sub.add_parser("replay", help="republish a recording on the bus")
+    rp.add_argument("file")
+    g = rp.add_mutually_exclusive_group()
+    g.add_argument("--speed", type=float, default=1.0, help="time scale (2 = twice as fast)")
+    g.add_argument("--fast", action="store_true", help="as fast as possible")
+    rp.add_argument("--only", action="append", default=[], help="key pattern to replay; repeatable")
+    rp.add_argument("--exclude", action="append", default=[], help="key pattern to skip; repeatable")
+    rp.add_argument("--wait", type=float, default=2.0, help="seconds to wait for the router")
+    rp.set_defaults(func=cmd_replay)
+
+    rc = sub.add_parser("recordings", help="list recordings with duration, topics and counts")
+    rc.add_argument("dir", nargs="?", default=os.environ.get("ASIBOT_RECORDINGS", "recordings"))
+    rc.add_argument("-v", "--verbose", action="store_true", help="per-topic counts and types")
+    rc.set_defaults(func=cmd_recordings)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except AsibotError as exc:
+        print(f"asibot {args.command}: {exc}", file=sys.stderr)
+        return 2
+    except ValueError as exc:  # compose errors and bad arguments: a sentence, not a traceback
+        print(f"asibot {args.command}: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

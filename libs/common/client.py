@@ -1,0 +1,140 @@
+"""The user's Python API (DESIGN.md): a thin, blocking wrapper over the kinematics and nav RPC.
+
+Points are the seed's [x, y, z, rot(y'), rot(z'')] in m and deg, joints in deg. Every call
+has a timeout; a refusal raises asibot.errors.RpcError (code + the server's sentence).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from typing import Sequence
+
+from asibot import keys
+from asibot.bus import Bus
+from asibot.errors import RpcError, Timeout
+
+#: Per-call timeout for quick verbs, s.
+CALL_TIMEOUT = 5.0
+
+
+class CartesianClient:
+    """`robot = CartesianClient(); robot.open("asibot-sim"); robot.movl(home); robot.wait()`."""
+
+    def __init__(self, robot: str | None = None, timeout: float = CALL_TIMEOUT) -> None:
+        self.robot: str | None = None
+        self.timeout = timeout
+        self._bus: Bus | None = None
+        if robot:
+            self.open(robot)
+
+    def open(self, robot: str) -> bool:
+        """Connect to the kinematics service of `robot`; raises Unavailable if it does not answer."""
+        if self._bus is None:
+            self._bus = Bus("client", wait=self.timeout)
+        self.robot = robot.strip("/")
+        if not self._bus.wait_for(keys.cart_rpc(self.robot, "stat"), timeout=self.timeout):
+            raise RpcError("unavailable", f"No kinematics service answers for robot {self.robot!r}; "
+                                          f"start it with `python -m asibot.kinematics --robot {self.robot}`.")
+        return True
+
+    def close(self) -> None:
+        if self._bus is not None:
+            self._bus.close()
+            self._bus = None
+
+    def __enter__(self) -> "CartesianClient":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _call(self, verb: str, _timeout: float | None = None, _nav: bool = False, **request: object) -> dict:
+        if self._bus is None or self.robot is None:
+            raise RpcError("bad_request", "Call open(robot) first.")
+        key = keys.nav_rpc(self.robot, verb) if _nav else keys.cart_rpc(self.robot, verb)
+        body = {k: list(v) if isinstance(v, (tuple, list)) else v for k, v in request.items() if v is not None}
+        return self._bus.call(key, body, timeout=_timeout or self.timeout)
+
+    # --- the seed's verbs ---------------------------------------------------------------
+    def stat(self, res: list | None = None) -> list[float]:
+        """Current point; also fills `res` in place like the seed's stat(res)."""
+        point = self._call("stat")["point"]
+        if res is not None:
+            res[:] = point
+        return point
+
+    def state(self) -> dict:
+        """The whole stat reply: state, point, joints, estop, fault."""
+        return self._call("stat")
+
+    def inv(self, point: Sequence[float], res: list | None = None) -> list[float]:
+        joints = self._call("inv", point=point)["joints"]
+        if res is not None:
+            res[:] = joints
+        return joints
+
+    def fwd(self, joints: Sequence[float]) -> list[float]:
+        return self._call("fwd", joints=joints)["point"]
+
+    def movj(self, point: Sequence[float] | None = None, *, joints: Sequence[float] | None = None,
+             duration: float | None = None, speed: float | None = None) -> float:
+        """Joint-space move to a point (or to `joints`, deg); returns the planned duration."""
+        return self._call("movj", point=point, joints=joints, duration=duration, speed=speed)["duration"]
+
+    def movl(self, point: Sequence[float], *, duration: float | None = None, speed: float | None = None) -> float:
+        """Straight line to a point, null start/end velocity; speed in m/s."""
+        return self._call("movl", point=point, duration=duration, speed=speed)["duration"]
+
+    def relj(self, joints: Sequence[float], *, duration: float | None = None) -> float:
+        return self._call("relj", joints=joints, duration=duration)["duration"]
+
+    def movv(self, velocity: Sequence[float]) -> None:
+        """Stream a velocity (m/s, deg/s); send again within 200 ms to keep moving."""
+        self._call("movv", velocity=velocity)
+
+    def home(self) -> float:
+        return self._call("home")["duration"]
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Block until the motion ends. On timeout the motion is stopped and Timeout is raised."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            left = 10.0 if deadline is None else max(0.01, min(10.0, deadline - time.monotonic()))
+            if self._call("wait", _timeout=left + 3.0, timeout=left)["done"]:
+                return True
+            if deadline is not None and time.monotonic() >= deadline:
+                self.stop()
+                raise Timeout(f"The motion did not finish within {timeout:g} s; it was stopped.")
+
+    def stop(self) -> None:
+        self._call("stop")
+
+    def tool(self, tool: Sequence[float]) -> None:
+        self._call("tool", tool=tool)
+
+    def act(self, action: str) -> dict:
+        """Gripper "open" or "close"; returns once the fingers stop: {"opening": m, "holding": bool}."""
+        reply = self._call("act", action=action)
+        return {"opening": reply["opening"], "holding": reply["holding"]}
+
+    def grip(self, close: bool = True) -> bool:
+        """Close (or open) the gripper; True when it holds something afterwards."""
+        return self.act("close" if close else "open")["holding"]
+
+    # --- mobile robot verbs (nav service) -------------------------------------------------
+    def goto(self, place: str, timeout: float = 10.0) -> dict:
+        return self._call("goto", _timeout=timeout, _nav=True, place=place)
+
+    def drive(self, distance: float) -> dict:
+        """Drive straight `distance` metres (negative: backwards)."""
+        return self._call("drive", _nav=True, distance=distance)
+
+    def turn(self, angle: float) -> dict:
+        """Turn in place by `angle` degrees (positive: counter-clockwise)."""
+        return self._call("turn", _nav=True, angle=angle)
+
+
+def default_robot() -> str:
+    """The robot a user program drives: ASIBOT_ROBOT or asibot-sim."""
+    return os.environ.get("ASIBOT_ROBOT", "asibot-sim")

@@ -1,0 +1,161 @@
+"""The key catalog: every Zenoh key expression of the stack, spelled once.
+
+Services never write key strings by hand; they call these functions, so a renamed key is
+one edit here and a typo is a NameError instead of a silent, empty subscription.
+"""
+
+from __future__ import annotations
+
+import re
+
+_NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]*$")
+
+RPC_VERBS_CART = (
+    "stat", "inv", "fwd", "movj", "movl", "movv", "relj", "stop", "wait", "tool", "act",
+    "home", "pointer",
+)
+RPC_VERBS_NAV = ("goto", "cancel", "places", "save_place", "drive", "turn")
+
+
+def _chunk(value: str, what: str) -> str:
+    """Validate one key chunk: no wildcards, separators or empty names sneak into a key."""
+    if not isinstance(value, str) or not _NAME.match(value):
+        raise ValueError(
+            f"{what} {value!r} is not a valid name: use letters, digits, '_', '-' or '.', "
+            "without '/' or wildcards"
+        )
+    return value
+
+
+def robot(robot_id: str) -> str:
+    """Prefix of everything that belongs to one robot."""
+    return f"rb/{_chunk(robot_id, 'robot id')}"
+
+
+def arm_state(robot_id: str) -> str:
+    return f"{robot(robot_id)}/arm/state"
+
+
+def arm_command(robot_id: str) -> str:
+    return f"{robot(robot_id)}/arm/command"
+
+
+def gripper_state(robot_id: str) -> str:
+    return f"{robot(robot_id)}/gripper/state"
+
+
+def gripper_command(robot_id: str) -> str:
+    return f"{robot(robot_id)}/gripper/command"
+
+
+def base_cmd_vel(robot_id: str) -> str:
+    return f"{robot(robot_id)}/base/cmd_vel"
+
+
+def base_odom(robot_id: str) -> str:
+    return f"{robot(robot_id)}/base/odom"
+
+
+def base_sonar(robot_id: str) -> str:
+    return f"{robot(robot_id)}/base/sonar"
+
+
+def base_bumpers(robot_id: str) -> str:
+    return f"{robot(robot_id)}/base/bumpers"
+
+
+def base_battery(robot_id: str) -> str:
+    return f"{robot(robot_id)}/base/battery"
+
+
+def camera_depth(robot_id: str, name: str) -> str:
+    return f"{robot(robot_id)}/camera/{_chunk(name, 'camera name')}/depth"
+
+
+def camera_rgb(robot_id: str, name: str) -> str:
+    return f"{robot(robot_id)}/camera/{_chunk(name, 'camera name')}/rgb"
+
+
+def camera_info(robot_id: str, name: str) -> str:
+    return f"{robot(robot_id)}/camera/{_chunk(name, 'camera name')}/info"
+
+
+def scan(robot_id: str) -> str:
+    return f"{robot(robot_id)}/scan"
+
+
+def cart_state(robot_id: str) -> str:
+    return f"{robot(robot_id)}/cart/state"
+
+
+def cart_rpc(robot_id: str, verb: str) -> str:
+    return f"{robot(robot_id)}/cart/rpc/{_chunk(verb, 'verb')}"
+
+
+def driver_rpc(robot_id: str, verb: str) -> str:
+    """Driver-level verbs (status, reset_fault; sim-only helpers such as reset_world)."""
+    return f"{robot(robot_id)}/driver/rpc/{_chunk(verb, 'verb')}"
+
+
+def driver_alive(robot_id: str) -> str:
+    """Liveliness of whatever implements the driver contract for this robot."""
+    return f"{robot(robot_id)}/driver/alive"
+
+
+def controller_alive(robot_id: str) -> str:
+    """Liveliness of the Cartesian controller; drivers stop the arm when it vanishes."""
+    return f"{robot(robot_id)}/controller/alive"
+
+
+def sim_truth(robot_id: str) -> str:
+    """Sim-only ground-truth base pose, kept apart from the (noisy) odometry."""
+    return f"{robot(robot_id)}/sim/truth"
+
+
+def nav_pose(robot_id: str) -> str:
+    return f"{robot(robot_id)}/nav/pose"
+
+
+def nav_map(robot_id: str) -> str:
+    return f"{robot(robot_id)}/nav/map"
+
+
+def nav_path(robot_id: str) -> str:
+    return f"{robot(robot_id)}/nav/path"
+
+
+def nav_status(robot_id: str) -> str:
+    return f"{robot(robot_id)}/nav/status"
+
+
+def nav_rpc(robot_id: str, verb: str) -> str:
+    return f"{robot(robot_id)}/nav/rpc/{_chunk(verb, 'verb')}"
+
+
+def estop(robot_id: str) -> str:
+    return f"{robot(robot_id)}/estop"
+
+
+def events(robot_id: str) -> str:
+    return f"{robot(robot_id)}/events"
+
+
+def service(service_name: str, instance: str) -> str:
+    """Liveliness token of one running service instance."""
+    return f"svc/{_chunk(service_name, 'service name')}/{_chunk(instance, 'instance')}"
+
+
+def health(service_name: str, instance: str) -> str:
+    return f"health/{_chunk(service_name, 'service name')}/{_chunk(instance, 'instance')}"
+
+
+ALL_SERVICES = "svc/**"
+EVERYTHING = "**"
+
+
+def parse_service(key: str) -> tuple[str, str]:
+    """Split `svc/<service>/<instance>` into its two names."""
+    parts = key.split("/")
+    if len(parts) != 3 or parts[0] != "svc":
+        raise ValueError(f"{key!r} is not a service liveliness key (svc/<service>/<instance>)")
+    return parts[1], parts[2]

@@ -1,0 +1,155 @@
+"""The Zenoh glue: bus messages to ArmDriver calls, and the driver's state and events out.
+
+Keys: publishes arm_state and events, subscribes arm_command, estop (latched) and watches
+controller_alive; serves driver rpc `status`, `reset_fault` and, on the emulated bus,
+`inject_fault`; announces driver_alive.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import time
+
+from asibot import keys, messages
+from asibot.arm_driver import canbus, config
+from asibot.arm_driver import emulator as emulation
+from asibot.arm_driver.driver import ArmDriver, FaultError
+from asibot.arm_driver.master import CanopenMaster
+from asibot.bus import Bus
+from asibot.errors import MessageError, RpcError
+from asibot.messages import ArmCommand, ArmState, EStop, Event
+
+log = logging.getLogger(__name__)
+
+SERVICE = "arm_driver"
+DEFAULT_ROBOT = "asibot"
+CAN_ENV = "ASIBOT_ARM_CAN"
+FAULTS = ("over_current", "heartbeat_loss", "silent", "bus_off", "reboot", "clear")
+
+
+class ArmDriverService:
+    """The driver contract for one CANopen arm."""
+
+    def __init__(self, bus: Bus, robot: str, can_name: str, config_path: str | None = None) -> None:
+        self.robot = robot
+        self.config = config.load(robot, config_path)
+        spec = canbus.parse(can_name)
+        self.emulator = None
+        if spec.emulated:
+            if spec.channel not in ("", "pp"):
+                raise ValueError("use --can emulated, or --can emulated:pp for drives without cyclic "
+                                 "synchronous position")
+            can_bus, self.emulator = emulation.start_private(
+                canbus.private_channel(), self.config.nodes, supports_csp=spec.channel != "pp",
+                counts_per_rad=self.config.joints[0].units.counts_per_rad)
+        else:
+            can_bus = canbus.open_bus(spec, self.config.bitrate)
+        self._last_event: dict[str, float] = {}
+        self._state = bus.publisher(keys.arm_state(robot), ArmState)
+        self._events = bus.publisher(keys.events(robot), Event)
+        self.bus = bus
+        self.driver = ArmDriver(CanopenMaster(can_bus, self.config), self.config,
+                                on_state=self._state.put, on_event=self._event)
+        bus.subscribe(keys.estop(robot), EStop, self._on_estop, latest=True)
+        bus.subscribe_raw(keys.arm_command(robot), self._on_command)
+        bus.watch(keys.controller_alive(robot), self._on_controller)
+        bus.serve(keys.driver_rpc(robot, "status"), self._status)
+        bus.serve(keys.driver_rpc(robot, "reset_fault"), self._reset_fault)
+        if self.emulator is not None:
+            bus.serve(keys.driver_rpc(robot, "inject_fault"), self._inject_fault)
+        bus.announce(keys.driver_alive(robot))
+        self.driver.start()
+
+    # ------------------------------------------------------------ in
+    def _on_command(self, key: str, payload: bytes, receive_ns: int) -> None:
+        # Decoded here rather than by bus.subscribe so that a malformed command (NaN, wrong
+        # mode) is answered with an Event, as the driver contract asks, not only counted.
+        try:
+            cmd = messages.decode(ArmCommand, payload)
+            self.driver.command(cmd.mode, cmd.values, cmd.velocities)
+        except (MessageError, ValueError) as exc:
+            self.bus.reject(key, exc)
+            self._event("error", "bad_command", f"Arm command rejected, the arm keeps its previous motion: {exc}",
+                        throttle=1.0)
+
+    def _on_estop(self, msg: EStop) -> None:
+        self.driver.set_estop(msg.engaged, msg.reason)
+
+    def _on_controller(self, key: str, alive: bool) -> None:
+        self.driver.set_controller_alive(alive)
+
+    def _status(self, request: dict) -> dict:
+        return {"robot": self.robot, **self.driver.status()}
+
+    def _reset_fault(self, request: dict) -> dict:
+        try:
+            return self.driver.reset_fault()
+        except FaultError as exc:
+            raise RpcError("fault", str(exc)) from None
+
+    def _inject_fault(self, request: dict) -> dict:
+        """Emulated bus only: {"fault": over_current|heartbeat_loss|silent|bus_off|reboot|clear,
+        "joint": "q3", "seconds": 0.5 (bus_off)}."""
+        fault = request.get("fault")
+        if fault not in FAULTS:
+            raise RpcError("bad_request", f"fault must be one of {', '.join(FAULTS)}")
+        emu = self.emulator
+        if fault == "clear":
+            emu.clear()
+            return {}
+        if fault == "bus_off":
+            seconds = request.get("seconds", 0.5)
+            if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not 0 < seconds <= 60:
+                raise RpcError("bad_request", "seconds must be a number between 0 and 60")
+            emu.bus_off(float(seconds))
+            return {}
+        joint = request.get("joint")
+        if joint not in self.config.names:
+            raise RpcError("bad_request", f"joint must be one of {', '.join(self.config.names)}")
+        node = self.config.nodes[self.config.names.index(joint)]
+        {"over_current": emu.over_current, "heartbeat_loss": emu.heartbeat_loss,
+         "silent": emu.silent, "reboot": emu.reboot}[fault](node)
+        return {}
+
+    # ------------------------------------------------------------ out
+    def _event(self, level: str, code: str, text: str, throttle: float = 0.0) -> None:
+        # Throttled by sentence: a flood of the same bad command logs once a second, yet a
+        # different mistake is still reported at once.
+        now = time.monotonic()
+        if throttle:
+            if now - self._last_event.get(text, -1e9) < throttle:
+                return
+            if len(self._last_event) > 256:
+                self._last_event.clear()
+            self._last_event[text] = now
+        self._events.put(Event(level=level, code=code, text=text))
+
+    # ------------------------------------------------------------ runtime hooks
+    def health(self) -> dict:
+        return self.driver.health()
+
+    def close(self) -> None:
+        self.driver.close()
+        if self.emulator is not None:
+            self.emulator.close()
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--can", default=None,
+                   help="CAN bus, named like python-can: socketcan:can0, pcan:PCAN_USBBUS1, virtual:NAME, or "
+                        f"'emulated' (5 emulated drives in this process); default ${CAN_ENV}")
+    p.add_argument("--config", default=None, help="CAN configuration YAML (default: robots/<robot>.yaml)")
+
+
+def build(bus: Bus, args: argparse.Namespace) -> ArmDriverService:
+    can_name = args.can or os.environ.get(CAN_ENV)
+    if not can_name:
+        raise ValueError(f"no CAN bus: pass --can socketcan:can0 (or pcan:PCAN_USBBUS1, or emulated), "
+                         f"or set {CAN_ENV}")
+    if not args.robot:
+        args.robot = DEFAULT_ROBOT
+        if args.instance == "main":      # the runtime announces svc/arm_driver/<instance> after build
+            args.instance = DEFAULT_ROBOT
+    return ArmDriverService(bus, args.robot, can_name, args.config)

@@ -1,0 +1,1 @@
+"""Pioneer P3-AT base driver over ARCOS (pyserial URLs), and an ARCOS emulator for tests and demos."""

@@ -1,0 +1,255 @@
+"""The Cartesian control state machine, free of any bus: the server feeds it measurements and
+requests, and asks it at every tick for the next joint reference.
+
+States follow reference/asibot.md section 3.1 (ccnc, ccjc, cclc, ccvc) plus `pointer`.
+Rules: motion is refused while the estop is engaged ("estop"), without a driver
+("unavailable"), with a faulted driver ("fault"), and while another planned motion runs
+("busy"; stop or wait first). Streaming modes (movv, pointer) stop after 200 ms without a new
+command, like the driver's own watchdog (DESIGN.md, Safety).
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+from typing import Any, Protocol, Sequence
+
+import numpy as np
+
+from asibot.errors import RpcError
+
+from . import trajectory
+
+NOT_CONTROLLING = "not_controlling"
+MOVJ = "movj"
+MOVL = "movl"
+MOVV = "movv"
+POINTER = "pointer"
+STATES = (NOT_CONTROLLING, MOVJ, MOVL, MOVV, POINTER)
+#: Streaming watchdog, s (DESIGN.md Safety: 200 ms in velocity mode).
+WATCHDOG = 0.2
+
+
+class Model(Protocol):
+    pose_size: int
+    def fwd(self, q: np.ndarray) -> np.ndarray: ...
+    def inv(self, pose: np.ndarray, q_guess: np.ndarray) -> np.ndarray: ...
+
+
+class Spec(Protocol):
+    joint_names: list[str]
+    lower: list[float]
+    upper: list[float]
+    max_velocity: list[float]
+
+
+@dataclass
+class Reference:
+    """What the server sends as ArmCommand(mode="position")."""
+    positions: list[float]
+    velocities: list[float]
+
+
+class Controller:
+    """Holds the measured state, the active motion and the outcome of the last motion."""
+
+    def __init__(self, model: Model, spec: Spec) -> None:
+        self.model, self.spec = model, spec
+        self.lower = np.asarray(spec.lower, float)
+        self.upper = np.asarray(spec.upper, float)
+        self.vmax = np.asarray(spec.max_velocity, float)
+        self.n = len(spec.joint_names)
+        self._lock = threading.RLock()
+        self._done = threading.Condition(self._lock)
+        self.state = NOT_CONTROLLING
+        self.q: np.ndarray | None = None
+        self.driver_alive = False
+        self.fault = ""
+        self.estop = False
+        self.estop_reason = ""
+        self.outcome: RpcError | None = None   # why the last motion ended early, None if it completed
+        self._plan: trajectory.JointPlan | None = None
+        self._t0 = 0.0
+        self._hold: np.ndarray | None = None
+        self._stream_pose: np.ndarray | None = None
+        self._stream_vel = np.zeros(0)
+        self._stream_seen = 0.0
+        self._last_tick: float | None = None
+        self._send_hold = False
+
+    # --- inputs -------------------------------------------------------------------------
+    def on_arm_state(self, positions: Sequence[float], fault: str) -> None:
+        with self._lock:
+            q = np.asarray(positions, float)
+            if q.shape != (self.n,) or not np.all(np.isfinite(q)):
+                return
+            self.q = q
+            if fault and not self.fault:
+                self._abort(RpcError("fault", f"The arm reports a fault: {fault} Reset it, then retry."))
+            self.fault = fault
+
+    def on_estop(self, engaged: bool, reason: str) -> None:
+        with self._lock:
+            self.estop, self.estop_reason = bool(engaged), reason
+            if engaged:
+                self._abort(RpcError("estop", f"Stopped by the emergency stop{': ' + reason if reason else ''}."))
+
+    def on_driver(self, alive: bool) -> None:
+        with self._lock:
+            self.driver_alive = alive
+            if not alive:
+                self.q = None
+                self._abort(RpcError("unavailable", "The arm driver disappeared; the motion was stopped. "
+                                                    "Start the driver (or the sim), then retry."))
+
+    # --- requests -----------------------------------------------------------------------
+    def check_can_move(self) -> np.ndarray:
+        """The measured joints if motion is allowed now; otherwise the refusal."""
+        if self.estop:
+            raise RpcError("estop", "The emergency stop is engaged"
+                           f"{' (' + self.estop_reason + ')' if self.estop_reason else ''}; release it before moving.")
+        if not self.driver_alive or self.q is None:
+            raise RpcError("unavailable", "No arm driver is running for this robot; start the driver or the sim.")
+        if self.fault:
+            raise RpcError("fault", f"The arm reports a fault: {self.fault} Reset it, then retry.")
+        return self.q.copy()
+
+    def _check_idle(self) -> None:
+        if self.state in (MOVJ, MOVL):
+            raise RpcError("busy", f"A {self.state} is still running; call wait() or stop() first.")
+
+    def movj(self, q_target: np.ndarray, now: float, *, duration: float | None = None,
+             speed: float | None = None) -> float:
+        """Start a joint-space move; returns its duration in s."""
+        with self._lock:
+            q0 = self.check_can_move()
+            self._check_idle()
+            q1 = np.asarray(q_target, float)
+            bad = np.flatnonzero((q1 < self.lower) | (q1 > self.upper))
+            if bad.size:
+                j = int(bad[0])
+                raise RpcError("joint_limit", f"Joint {j + 1} target {np.degrees(q1[j]):.1f} deg is outside its limits "
+                                              f"{np.degrees(self.lower[j]):.0f}..{np.degrees(self.upper[j]):.0f} deg.")
+            plan = trajectory.plan_movj(q0, q1, self.vmax, duration=duration, speed=speed)
+            self._start(MOVJ, plan, now)
+            return plan.duration
+
+    def movl(self, pose_target: np.ndarray, now: float, *, duration: float | None = None,
+             speed: float | None = None, describe: Any = None) -> float:
+        """Start a straight-line move to an SI pose after checking the whole path."""
+        with self._lock:
+            q0 = self.check_can_move()
+            self._check_idle()
+            p0 = np.asarray(self.model.fwd(q0), float)
+            kw = {"describe": describe} if describe else {}
+            plan = trajectory.plan_movl(self.model, q0, p0, pose_target, self.lower, self.upper, self.vmax,
+                                        duration=duration, speed=speed, **kw)
+            self._start(MOVL, plan, now)
+            return plan.duration
+
+    def stream(self, velocity: np.ndarray, now: float, mode: str = MOVV) -> None:
+        """Set or refresh a streamed pose velocity (SI); it lapses after WATCHDOG seconds."""
+        with self._lock:
+            q0 = self.check_can_move()
+            self._check_idle()
+            v = np.asarray(velocity, float)
+            if v.shape != (self.model.pose_size,) or not np.all(np.isfinite(v)):
+                raise RpcError("bad_request", f"A velocity needs {self.model.pose_size} finite numbers.")
+            if self.state != mode:
+                self._stream_pose = np.asarray(self.model.fwd(q0), float)
+                self._hold = q0
+                self._last_tick = None
+                self.outcome = None
+            self.state = mode
+            self._stream_vel = v
+            self._stream_seen = now
+
+    def stop(self) -> None:
+        """Stop any motion; the arm holds its last reference."""
+        with self._lock:
+            self._abort(None)
+
+    def wait(self, timeout: float | None) -> bool:
+        """Block until no planned motion runs; False on timeout (the motion keeps running)."""
+        with self._lock:
+            return self._done.wait_for(lambda: self.state not in (MOVJ, MOVL), timeout)
+
+    # --- the loop -----------------------------------------------------------------------
+    def tick(self, now: float) -> Reference | None:
+        """The joint reference for this instant, or None when nothing should be sent."""
+        with self._lock:
+            if self.state in (MOVJ, MOVL) and self._plan is not None:
+                t = now - self._t0
+                if t >= self._plan.duration:
+                    q = self._plan.q_at(self._plan.duration)
+                    self._finish(q)
+                    return Reference(q.tolist(), [0.0] * self.n)
+                return Reference(self._plan.q_at(t).tolist(), self._plan.qdot_at(t).tolist())
+            if self.state in (MOVV, POINTER):
+                return self._stream_tick(now)
+            if self._send_hold and self._hold is not None:
+                self._send_hold = False
+                return Reference(self._hold.tolist(), [0.0] * self.n)
+            return None
+
+    def _stream_tick(self, now: float) -> Reference | None:
+        if now - self._stream_seen > WATCHDOG:
+            self._abort(RpcError("timeout", "No streamed command for 200 ms; the motion was stopped."))
+            return self.tick(now)
+        dt = 0.0 if self._last_tick is None else now - self._last_tick
+        self._last_tick = now
+        target = self._stream_pose + self._stream_vel * dt
+        q = self._solve(target)
+        if q is None:
+            return self._stream_refused()
+        qdot = (q - self._hold) / dt if dt > 0 else np.zeros(self.n)
+        over = float(np.max(np.abs(qdot) / self.vmax))
+        if over > 1.0:  # near a singularity: slow the stream down instead of exceeding joint speeds
+            target = self._stream_pose + self._stream_vel * dt / (over * 1.05)
+            q = self._solve(target)
+            if q is None:
+                return self._stream_refused()
+            qdot = (q - self._hold) / dt
+            if np.any(np.abs(qdot) > self.vmax):
+                return self._stream_refused()
+        self._stream_pose, self._hold = target, q
+        return Reference(q.tolist(), qdot.tolist())
+
+    def _solve(self, pose: np.ndarray) -> np.ndarray | None:
+        """IK near the held joints, or None when out of reach or past a limit."""
+        try:
+            q = np.asarray(self.model.inv(pose, self._hold), float)
+        except RpcError:
+            return None
+        if np.any(q < self.lower) or np.any(q > self.upper):
+            return None
+        return q
+
+    def _stream_refused(self) -> Reference:
+        """Hold still at the edge of the workspace instead of jumping; streaming goes on."""
+        return Reference(self._hold.tolist(), [0.0] * self.n)
+
+    # --- internals ----------------------------------------------------------------------
+    def _start(self, state: str, plan: trajectory.JointPlan, now: float) -> None:
+        self.outcome = None
+        self._plan, self._t0, self.state = plan, now, state
+        self._hold = plan.q_at(plan.duration)
+
+    def _finish(self, q: np.ndarray) -> None:
+        self._plan, self._hold, self.state = None, q, NOT_CONTROLLING
+        self._done.notify_all()
+
+    def _abort(self, why: RpcError | None) -> None:
+        if self.state == NOT_CONTROLLING:
+            return
+        if self._plan is not None and self.q is not None:
+            self._hold = self.q.copy()
+        self.outcome = why
+        self._send_hold = True
+        self._plan, self.state = None, NOT_CONTROLLING
+        self._done.notify_all()
+
+    def hold_reference(self) -> Reference | None:
+        """After a stop: where the arm should stay (measured position at the stop)."""
+        with self._lock:
+            return None if self._hold is None else Reference(self._hold.tolist(), [0.0] * self.n)

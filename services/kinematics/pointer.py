@@ -1,0 +1,78 @@
+"""The seed's handheld-pointer mode (reference/asibot.md 3.3, streaming fwd/bkwd/rot): the
+arm tracks a virtual point in front of the tool; the device gives the orientation, a
+three-way input moves forward / holds / moves backward, and nothing moves unless the
+dead-man input is held.
+
+Request of RPC verb `pointer` (the web UI sends it at about 20 Hz; each one keeps the motion
+alive for 200 ms):
+  deadman   bool   required; False stops the arm at once
+  direction str    "forward" | "hold" | "backward" (default "hold")
+  yaw       float  azimuth rate, deg/s, positive turns the arm counter-clockwise (default 0)
+  pitch     float  device pitch, deg: the wanted rot(y') of the tool (default: keep)
+  speed     float  translation speed along the tool axis, m/s (default 0.05, max 0.1)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from asibot.errors import RpcError
+
+#: Default translation speed, m/s (trajectoryRefSpeed, asibot.md 3.2).
+DEFAULT_SPEED = 0.05
+MAX_SPEED = 0.1
+#: How fast the tool pitch follows the device, 1/s (reaches it in about half a second).
+PITCH_GAIN = 2.0
+DIRECTIONS = {"forward": 1.0, "hold": 0.0, "backward": -1.0}
+
+
+@dataclass
+class PointerInput:
+    deadman: bool
+    direction: str = "hold"
+    yaw: float = 0.0
+    pitch: float | None = None
+    speed: float = DEFAULT_SPEED
+
+    @classmethod
+    def from_request(cls, req: dict) -> "PointerInput":
+        """Validate a request; bad input raises bad_request with the field name."""
+        if not isinstance(req.get("deadman"), bool):
+            raise RpcError("bad_request", "pointer needs 'deadman': true or false.")
+        direction = req.get("direction", "hold")
+        if direction not in DIRECTIONS:
+            raise RpcError("bad_request", f"'direction' must be forward, hold or backward; got {direction!r}.")
+        out = cls(deadman=req["deadman"], direction=direction)
+        for name in ("yaw", "pitch", "speed"):
+            if req.get(name) is None:
+                continue
+            value = req[name]
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise RpcError("bad_request", f"'{name}' must be a finite number; got {value!r}.")
+            setattr(out, name, float(value))
+        if not 0.0 < out.speed <= MAX_SPEED:
+            raise RpcError("bad_request", f"'speed' must be in (0, {MAX_SPEED}] m/s; got {out.speed}.")
+        return out
+
+
+def pointer_velocity(pose: np.ndarray, cmd: PointerInput) -> np.ndarray:
+    """SI velocity of the ASIBOT 5-pose [x, y, z, rot(y'), rot(z'')] for one pointer input.
+
+    The tool axis is Rz(azimuth)·Ry(rot(y')) applied to z; forward moves along it (towards
+    the virtual point), backward away from it. The yaw rate turns the whole point about the
+    base axis, as the seed's dRotZ did.
+    """
+    x, y, z, pitch = (float(v) for v in pose[:4])
+    azimuth = math.atan2(y, x)
+    axis = np.array([math.cos(azimuth) * math.sin(pitch), math.sin(azimuth) * math.sin(pitch), math.cos(pitch)])
+    v = np.zeros(len(pose))
+    v[:3] = axis * cmd.speed * DIRECTIONS[cmd.direction]
+    wz = math.radians(cmd.yaw)
+    v[0] += -wz * y
+    v[1] += wz * x
+    if cmd.pitch is not None:
+        v[3] = PITCH_GAIN * (math.radians(cmd.pitch) - pitch)
+    return v

@@ -1,0 +1,270 @@
+"""The sim on the bus: the driver contract of DESIGN.md, spoken by a MuJoCo world.
+
+Physics runs on its own thread (2 ms steps, in 10 ms batches paced by the wall clock, or
+back to back with `fast`); cameras render on another thread from a private copy of the
+configuration, so a slow frame never delays the 100 Hz arm state. All logic lives in
+`Simulation`; this class only moves messages between it and the bus.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import dataclass
+
+import mujoco
+
+from asibot import keys
+from asibot import messages as m
+from asibot.bus import Bus
+from asibot.errors import MessageError, RpcError
+from asibot.sim.arm import CommandRejected, Notice
+from asibot.sim.cameras import Camera
+from asibot.sim.simulation import Simulation
+from asibot.timing import Ticker
+
+log = logging.getLogger("asibot.sim")
+
+TICK_S = 0.01
+"""Physics batch: 5 steps of 2 ms; the arm state goes out once per batch (100 Hz)."""
+CATCH_UP_S = 0.05
+"""Most simulated time run in one batch to catch up with the wall clock."""
+CAMERA_KINDS = {"front": ("depth",), "back": ("depth",), "rgb": ("rgb",), "kitchen": ("depth", "rgb")}
+"""What each camera of the worlds produces (camera names are those of worlds/*.xml)."""
+
+
+@dataclass
+class Options:
+    fast: bool = False
+    camera_hz: float = 10.0
+    width: int = 320
+    height: int = 240
+    depth_method: str = "render"
+
+
+class SimService:
+    """Publishes the sim's state and obeys commands, like a hardware driver."""
+
+    def __init__(self, bus: Bus, sim: Simulation, options: Options) -> None:
+        self.bus, self.sim, self.opt = bus, sim, options
+        rid = sim.robot.robot_id
+        self.robot_id = rid
+        self.stop_event = threading.Event()
+        self._pub_arm = bus.publisher(keys.arm_state(rid), m.ArmState)
+        self._pub_grip = bus.publisher(keys.gripper_state(rid), m.GripperState)
+        self._pub_event = bus.publisher(keys.events(rid), m.Event)
+        if sim.base:
+            self._pub_odom = bus.publisher(keys.base_odom(rid), m.Odometry)
+            self._pub_sonar = bus.publisher(keys.base_sonar(rid), m.Sonar)
+            self._pub_bump = bus.publisher(keys.base_bumpers(rid), m.Bumpers)
+            self._pub_batt = bus.publisher(keys.base_battery(rid), m.Battery)
+            self._pub_truth = bus.publisher(keys.sim_truth(rid), m.Pose2D)
+        self._cameras_ready = threading.Event()
+        if options.camera_hz <= 0:
+            self._cameras_ready.set()
+        self._commands_rejected = 0
+        self._frames = 0
+        self._rtf = 0.0
+        bus.subscribe_raw(keys.arm_command(rid), self._on_arm_command)
+        bus.subscribe_raw(keys.gripper_command(rid), self._on_gripper_command)
+        if sim.base:
+            bus.subscribe_raw(keys.base_cmd_vel(rid), self._on_cmd_vel)
+        bus.subscribe(keys.estop(rid), m.EStop, self._on_estop, latest=True)
+        bus.watch(keys.controller_alive(rid), self._on_controller)
+        for verb, handler in {"status": self._rpc_status, "reset_fault": self._rpc_reset_fault,
+                              "reset_world": self._rpc_reset_world,
+                              "set_object_pose": self._rpc_set_object_pose,
+                              "object_pose": self._rpc_object_pose}.items():
+            bus.serve(keys.driver_rpc(rid, verb), handler)
+        bus.announce(keys.driver_alive(rid))
+        self._threads = [threading.Thread(target=self._physics_loop, name="sim-physics", daemon=True)]
+        if options.camera_hz > 0:
+            self._threads.append(threading.Thread(target=self._camera_loop, name="sim-cameras", daemon=True))
+        for t in self._threads:
+            t.start()
+
+    # ------------------------------------------------------------------ commands in
+    def _decode(self, msg_type: type, payload: bytes, what: str):
+        try:
+            return m.decode(msg_type, payload)
+        except MessageError as exc:
+            self._reject(f"Rejected a malformed {what}: {exc}")
+            return None
+
+    def _reject(self, text: str) -> None:
+        self._commands_rejected += 1
+        log.warning("%s", text)
+        self._pub_event.put(m.Event(level="error", code="bad_command", text=text))
+
+    def _ignored(self, exc: CommandRejected) -> None:
+        """Commands refused because of the state (estop, fault) are logged, not shouted."""
+        if self.sim.estop:
+            log.debug("ignored a command: %s", exc)
+        else:
+            self._reject(f"Rejected a command: {exc}.")
+
+    def _on_arm_command(self, key: str, payload: bytes, t: int) -> None:
+        cmd = self._decode(m.ArmCommand, payload, "arm command")
+        if cmd is not None:
+            try:
+                self.sim.command_arm(cmd)
+            except CommandRejected as exc:
+                self._ignored(exc)
+
+    def _on_gripper_command(self, key: str, payload: bytes, t: int) -> None:
+        cmd = self._decode(m.GripperCommand, payload, "gripper command")
+        if cmd is not None:
+            try:
+                self.sim.command_gripper(cmd.opening)
+            except CommandRejected as exc:
+                self._ignored(exc)
+
+    def _on_cmd_vel(self, key: str, payload: bytes, t: int) -> None:
+        cmd = self._decode(m.Twist, payload, "drive command")
+        if cmd is not None:
+            try:
+                self.sim.command_base(cmd.vx, cmd.wz)
+            except CommandRejected as exc:
+                self._ignored(exc)
+
+    def _on_estop(self, msg: m.EStop) -> None:
+        self.sim.set_estop(msg.engaged, msg.reason)
+
+    def _on_controller(self, key: str, alive: bool) -> None:
+        if not alive:
+            self.sim.controller_lost()
+
+    # ------------------------------------------------------------------ RPC
+    def _rpc_status(self, req: dict) -> dict:
+        return self.sim.status()
+
+    def _rpc_reset_fault(self, req: dict) -> dict:
+        self.sim.reset_fault()
+        return {}
+
+    def _rpc_reset_world(self, req: dict) -> dict:
+        self.sim.reset_world()
+        return {}
+
+    def _rpc_set_object_pose(self, req: dict) -> dict:
+        try:
+            self.sim.set_object_pose(str(req.get("name", "")), list(req.get("pos", [])), req.get("quat"))
+        except (KeyError, ValueError, TypeError) as exc:
+            raise RpcError("bad_request", str(exc).strip("'\"")) from None
+        return {}
+
+    def _rpc_object_pose(self, req: dict) -> dict:
+        name = str(req.get("name", ""))
+        if name not in self.sim.scene.objects:
+            raise RpcError("bad_request", f"no object {name!r}; objects are {', '.join(self.sim.scene.objects)}")
+        return {"pos": self.sim.object_position(name).tolist()}
+
+    # ------------------------------------------------------------------ loops
+    def _physics_loop(self) -> None:
+        steps = max(1, round(TICK_S / self.sim.dt))
+        # Creating GL contexts and the first renders take the GIL for a while: let the cameras
+        # warm up first so that real time starts when the physics can keep it.
+        self._cameras_ready.wait(timeout=15.0)
+        ticker = None if self.opt.fast else Ticker(1.0 / TICK_S, stop=self.stop_event)
+        tick = 0
+        start_wall, start_sim = time.monotonic(), self.sim.time
+        wall0, sim0 = start_wall, start_sim
+        try:
+            while not self.stop_event.is_set():
+                if ticker is None:
+                    n = steps
+                else:
+                    if not ticker.wait():
+                        break
+                    # Catch up after a late tick (GC, a slow frame) instead of losing sim time;
+                    # at most CATCH_UP_S at once so an overloaded machine degrades gracefully.
+                    behind = (time.monotonic() - start_wall) - (self.sim.time - start_sim)
+                    n = int(round(min(max(behind, 0.0), CATCH_UP_S) / self.sim.dt))
+                    if behind > 2 * CATCH_UP_S:  # hopelessly late: resynchronise, do not sprint
+                        start_wall, start_sim = time.monotonic(), self.sim.time
+                if n > 0:
+                    self.sim.step(n)
+                tick += 1
+                self._publish(tick)
+                if tick % 100 == 0:
+                    wall = time.monotonic()
+                    self._rtf = (self.sim.time - sim0) / max(wall - wall0, 1e-9)
+                    wall0, sim0 = wall, self.sim.time
+        except Exception:
+            log.exception("the physics loop crashed; stopping the sim")
+            self.stop_event.set()
+
+    def _publish(self, tick: int) -> None:
+        sim = self.sim
+        self._pub_arm.put(sim.arm_state())
+        while not sim.notices.empty():
+            n: Notice = sim.notices.get()
+            self._pub_event.put(m.Event(level=n.level, code=n.code, text=n.text))
+        if tick % 5 == 0:
+            self._pub_grip.put(sim.gripper_state())
+        if sim.base is None:
+            return
+        if tick % 5 == 0:
+            self._pub_odom.put(sim.odometry())
+            x, y, th = sim.truth()
+            self._pub_truth.put(m.Pose2D(x=x, y=y, theta=th))
+        if tick % 10 == 0:
+            self._pub_sonar.put(sim.sonar())
+            self._pub_bump.put(sim.bumpers())
+        if tick % 100 == 0:
+            self._pub_batt.put(m.Battery(volts=sim.battery.volts))
+
+    def _camera_loop(self) -> None:
+        sim, opt = self.sim, self.opt
+        robot_body = sim.scene.base.body if sim.scene.base else sim.scene.arm_base_body
+        cams = [Camera(sim.model, name, opt.width, opt.height, robot_body)
+                for name in sim.scene.cameras if name in CAMERA_KINDS]
+        pubs = {}
+        for c in cams:
+            pubs[c.name] = {"info": self.bus.publisher(keys.camera_info(self.robot_id, c.name), m.CameraInfo),
+                            "depth": self.bus.publisher(keys.camera_depth(self.robot_id, c.name), m.DepthImage),
+                            "rgb": self.bus.publisher(keys.camera_rgb(self.robot_id, c.name), m.RgbImage)}
+        data = mujoco.MjData(sim.model)
+        try:
+            first = True
+            ticker = None
+            while first or ticker.wait():
+                sim.copy_positions(data)
+                mujoco.mj_kinematics(sim.model, data)
+                mujoco.mj_camlight(sim.model, data)
+                for c in cams:
+                    p = pubs[c.name]
+                    p["info"].put(c.info(data))
+                    if "depth" in CAMERA_KINDS[c.name]:
+                        p["depth"].put(m.DepthImage(depth=c.depth(data, opt.depth_method)))
+                    if "rgb" in CAMERA_KINDS[c.name]:
+                        p["rgb"].put(c.rgb_jpeg(data))
+                self._frames += 1
+                if first:
+                    first = False
+                    ticker = Ticker(opt.camera_hz, stop=self.stop_event)
+                    self._cameras_ready.set()
+        except Exception:
+            log.exception("the camera loop crashed; cameras stopped (physics keeps running)")
+        finally:
+            self._cameras_ready.set()
+            for c in cams:
+                c.close()
+
+    # ------------------------------------------------------------------ runtime hooks
+    def run(self, stop: threading.Event) -> None:
+        """Block until asked to stop (or the physics thread dies)."""
+        while not stop.wait(0.2):
+            if self.stop_event.is_set():
+                raise RuntimeError("the simulation stopped by itself; see the log above")
+
+    def health(self) -> dict:
+        return {"world": self.sim.world, "sim_time": round(self.sim.time, 3), "rtf": round(self._rtf, 3),
+                "camera_frames": self._frames, "commands_rejected": self._commands_rejected,
+                "estop": self.sim.estop, "arm_mode": self.sim.arm.mode}
+
+    def close(self) -> None:
+        self.stop_event.set()
+        for t in self._threads:
+            t.join(timeout=1.5)

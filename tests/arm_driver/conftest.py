@@ -1,0 +1,101 @@
+"""Fixtures: a private virtual CAN channel with the five emulated drives, a sniffer on it,
+and the arm driver (without Zenoh) whose states and events are captured."""
+
+from __future__ import annotations
+
+import threading
+import uuid
+from dataclasses import dataclass, field
+
+import can
+import pytest
+
+from asibot.arm_driver import config, emulator
+from asibot.arm_driver.driver import ArmDriver
+from asibot.arm_driver.master import CanopenMaster
+
+
+class Sniffer(can.Listener):
+    """Records every frame seen on the channel (a third bus: it hears master and drives)."""
+
+    def __init__(self, channel: str) -> None:
+        self.bus = can.Bus(interface="virtual", channel=channel)
+        self.frames: list[can.Message] = []
+        self._lock = threading.Lock()
+        self.notifier = can.Notifier(self.bus, [self], timeout=0.01)
+
+    def on_message_received(self, msg: can.Message) -> None:
+        with self._lock:
+            self.frames.append(msg)
+
+    def seen(self) -> list[tuple[int, bytes, float]]:
+        with self._lock:
+            return [(m.arbitration_id, bytes(m.data), m.timestamp) for m in self.frames if not m.is_error_frame]
+
+    def clear(self) -> None:
+        with self._lock:
+            self.frames.clear()
+
+    def close(self) -> None:
+        self.notifier.stop()
+        self.bus.shutdown()
+
+
+@dataclass
+class Rig:
+    cfg: config.ArmConfig
+    emu: emulator.DriveEmulator
+    master: CanopenMaster
+    sniffer: Sniffer
+    driver: ArmDriver | None = None
+    states: list = field(default_factory=list)
+    events: list = field(default_factory=list)
+
+    @property
+    def last(self):
+        return self.states[-1]
+
+    def event_codes(self) -> list[str]:
+        return [e[1] for e in list(self.events)]
+
+    def start_driver(self) -> ArmDriver:
+        self.driver = ArmDriver(self.master, self.cfg, self.states.append, lambda *e: self.events.append(e))
+        self.driver.start()
+        return self.driver
+
+
+@pytest.fixture
+def cfg() -> config.ArmConfig:
+    return config.load("asibot")
+
+
+def _rig(cfg: config.ArmConfig, **emulator_options) -> Rig:
+    channel = f"test-{uuid.uuid4().hex[:8]}"
+    sniffer = Sniffer(channel)
+    bus, emu = emulator.start_private(channel, cfg.nodes, **emulator_options)
+    return Rig(cfg, emu, CanopenMaster(bus, cfg), sniffer)
+
+
+@pytest.fixture
+def rig(cfg):
+    """Master + 5 emulated drives (CSP capable); call rig.start_driver() to run the driver."""
+    r = _rig(cfg)
+    yield r
+    _close(r)
+
+
+@pytest.fixture
+def pp_rig(cfg):
+    """Same, but the drives only know profile position."""
+    r = _rig(cfg, supports_csp=False)
+    yield r
+    _close(r)
+
+
+def _close(r: Rig) -> None:
+    if r.driver is not None:
+        r.driver.close()
+    else:
+        r.master.close()
+    r.emu.close()
+    r.sniffer.close()

@@ -1,0 +1,141 @@
+"""Recording to MCAP, listing, replaying, and recovering a file whose writer was killed."""
+
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from asibot import keys, messages as m
+from asibot.bus import Bus
+from asibot.cli import main as asibot
+from asibot.recordings import NotARecording, iter_messages, list_recordings, summarize
+from asibot.replay import replay
+from asibot.testing import wait_until
+
+
+def start_recorder(directory: Path) -> subprocess.Popen:
+    p = subprocess.Popen([sys.executable, "-m", "asibot.recorder", "--dir", str(directory)],
+                         stderr=subprocess.PIPE, text=True)
+    for line in p.stderr:
+        if "running" in line:
+            return p
+    raise AssertionError("recorder did not start")
+
+
+def one_file(directory: Path) -> Path:
+    files = list(directory.glob("*.mcap"))
+    assert len(files) == 1, files
+    return files[0]
+
+
+def publish_pattern(bus: Bus) -> list[tuple[str, bytes, float]]:
+    """Two topics with a known rhythm: 25 states every 20 ms, one twist every 100 ms."""
+    state = bus.publisher(keys.arm_state("rec"), m.ArmState)
+    twist = bus.publisher(keys.base_cmd_vel("rec"), m.Twist)
+    sent = []
+    t0 = time.monotonic()
+    for i in range(25):
+        msg = m.ArmState(names=["q1"], positions=[i * 0.1], velocities=[0.0])
+        state.put(msg)
+        sent.append((state.key, m.encode(msg), time.monotonic() - t0))
+        if i % 5 == 0:
+            tw = m.Twist(vx=0.1 * i, wz=0.0)
+            twist.put(tw)
+            sent.append((twist.key, m.encode(tw), time.monotonic() - t0))
+        time.sleep(0.02)
+    return sent
+
+
+@pytest.mark.slow
+def test_record_then_replay_reproduces_topics_payloads_and_timing(router, tmp_path, capsys):
+    rec = start_recorder(tmp_path)
+    with Bus("pub") as bus:
+        time.sleep(0.5)  # let the recorder's subscription reach the router
+        sent = publish_pattern(bus)
+        time.sleep(0.3)
+    rec.send_signal(signal.SIGTERM)
+    assert rec.wait(5) == 0
+    path = one_file(tmp_path)
+
+    summary = summarize(path)
+    assert summary.complete
+    assert summary.counts[keys.arm_state("rec")] == 25
+    assert summary.counts[keys.base_cmd_vel("rec")] == 5
+    assert summary.types[keys.base_cmd_vel("rec")] == "Twist"
+    assert asibot(["recordings", str(tmp_path), "-v"]) == 0
+    out = capsys.readouterr().out
+    assert path.name in out and keys.arm_state("rec") in out
+
+    # replay into a fresh subscriber and compare
+    with Bus("sub") as sub_bus, Bus("player") as player:
+        got = []
+        sub_bus.subscribe_raw("rb/rec/**", lambda k, p, t: got.append((k, p, time.monotonic())))
+        time.sleep(0.3)
+        assert replay(path, player.put_raw, speed=1.0) == 30
+        wait_until(lambda: len(got) == 30, 3)
+    assert [(k, p) for k, p, _ in got] == [(k, p) for k, p, _ in sent]
+    t_sent = [t - sent[0][2] for *_, t in sent]
+    t_got = [t - got[0][2] for *_, t in got]
+    assert max(abs(a - b) for a, b in zip(t_sent, t_got)) < 0.03
+
+
+def test_replay_as_fast_as_possible_and_filters(router, tmp_path):
+    from asibot.recorder import McapRecorder
+    path = tmp_path / "x.mcap"
+    r = McapRecorder(path)
+    for i in range(100):
+        r.write("rb/a/arm/state" if i % 2 else "health/x/y", bytes([i]), 1_000_000_000 * i)
+    r.close()
+    seen = []
+    t = time.monotonic()
+    assert replay(path, lambda k, p: seen.append(k), speed=None) == 50  # health/** excluded by default
+    assert time.monotonic() - t < 5, "100 s of recording replayed without waiting"
+    assert set(seen) == {"rb/a/arm/state"}
+    with pytest.raises(ValueError):
+        replay(path, lambda k, p: None, speed=0)
+
+
+@pytest.mark.slow
+def test_killed_recorder_file_is_recovered(router, tmp_path, capsys):
+    rec = start_recorder(tmp_path)
+    with Bus("pub") as bus:
+        time.sleep(0.5)
+        pub = bus.publisher(keys.arm_state("crash"), m.ArmState, block=True)
+        for i in range(500):
+            pub.put(m.ArmState(names=["q1"], positions=[float(i)], velocities=[0.0]))
+        time.sleep(1.6)  # at least one flush period: these 500 are on disk
+        for i in range(500, 600):
+            pub.put(m.ArmState(names=["q1"], positions=[float(i)], velocities=[0.0]))
+        rec.kill()
+        rec.wait()
+    path = one_file(tmp_path)
+    records = [r for r in iter_messages(path) if r.key == keys.arm_state("crash")]
+    assert len(records) >= 500
+    positions = [m.decode(m.ArmState, r.payload).positions[0] for r in records]
+    assert positions == [float(i) for i in range(len(records))]
+    s = list_recordings(tmp_path)[0]
+    assert not s.complete
+    asibot(["recordings", str(tmp_path)])
+    assert "recovered" in capsys.readouterr().out
+
+
+def test_recorder_never_overwrites(tmp_path):
+    from asibot.recorder import McapRecorder
+    (tmp_path / "a.mcap").write_bytes(b"precious")
+    with pytest.raises(FileExistsError):
+        McapRecorder(tmp_path / "a.mcap")
+    assert (tmp_path / "a.mcap").read_bytes() == b"precious"
+
+
+def test_a_file_that_is_not_a_recording_is_refused_clearly(tmp_path, capsys):
+    (tmp_path / "notes.mcap").write_text("shopping list")
+    assert asibot(["replay", str(tmp_path / "notes.mcap")]) == 1
+    assert "is not an MCAP recording" in capsys.readouterr().err
+    assert asibot(["recordings", str(tmp_path)]) == 0
+    assert "not an MCAP file" in capsys.readouterr().out
+    with pytest.raises(NotARecording):
+        list(iter_messages(tmp_path / "notes.mcap"))
+    assert (tmp_path / "notes.mcap").read_text() == "shopping list"

@@ -1,0 +1,81 @@
+"""Fixtures: an ideal driver and a kinematics server (real Zenoh, in threads) plus a client.
+
+One router, driver and server serve the whole module (a fresh set per test would spend most of
+the time on start-up); each test starts from a stopped controller and the same joints. Tests
+that destroy the setup build their own (`fresh`).
+"""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from asibot import testing
+from asibot.bus import Bus
+from asibot.client import CartesianClient
+from asibot.kinematics.server import KinematicsServer
+from asibot.testing import wait_until
+
+from .model import asibot_model, asibot_spec
+from .ideal_driver import IdealDriver
+
+ROBOT = "asibot-test"
+START = np.radians([0.0, 5.0, 5.0, 5.0, 0.0])
+
+
+def build(robot: str) -> SimpleNamespace:
+    driver = IdealDriver(robot, asibot_spec())
+    driver.set_joints(START)
+    bus = Bus("kinematics")
+    server = KinematicsServer(bus, robot, asibot_model(), asibot_spec(), rate=100.0)
+    wait_until(lambda: server.ctl.driver_alive and server.ctl.q is not None, timeout=5.0)
+    return SimpleNamespace(robot=robot, driver=driver, bus=bus, server=server, client=CartesianClient(robot))
+
+
+def teardown(s: SimpleNamespace) -> None:
+    s.client.close()
+    s.server.close()
+    s.bus.close()
+    s.driver.close()
+
+
+@pytest.fixture(scope="module")
+def shared():
+    with testing.router() as endpoint:
+        s = build(ROBOT)
+        s.router = endpoint
+        yield s
+        teardown(s)
+
+
+@pytest.fixture
+def client(shared):
+    shared.server.ctl.stop()
+    wait_until(lambda: shared.server.ctl.tick(0.0) is None, timeout=1.0)
+    shared.driver.set_joints(START)
+    wait_until(lambda: np.allclose(shared.server.ctl.q, START, atol=1e-9), timeout=2.0)
+    yield shared.client
+    shared.server.ctl.stop()
+
+
+@pytest.fixture
+def driver(shared):
+    return shared.driver
+
+
+@pytest.fixture
+def server(shared):
+    return shared.server
+
+
+@pytest.fixture
+def router(shared):
+    return shared.router
+
+
+@pytest.fixture
+def fresh(shared):
+    """A second robot of its own on the shared router, for tests that kill its driver."""
+    s = build(ROBOT + "-2")
+    yield s
+    teardown(s)

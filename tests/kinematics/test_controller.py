@@ -1,0 +1,97 @@
+import math
+
+import numpy as np
+import pytest
+
+from asibot.errors import RpcError
+from asibot.kinematics.controller import MOVJ, MOVV, NOT_CONTROLLING, Controller
+from asibot.kinematics.pointer import PointerInput, pointer_velocity
+
+from .model import asibot_model, asibot_spec
+
+Q0 = np.array([0.0, 0.3, 0.6, 0.4, 0.0])
+
+
+def ready() -> Controller:
+    c = Controller(asibot_model(), asibot_spec())
+    c.on_driver(True)
+    c.on_arm_state(Q0, "")
+    return c
+
+
+@pytest.mark.parametrize("setup,code", [
+    (lambda c: c.on_estop(True, "button"), "estop"),
+    (lambda c: c.on_driver(False), "unavailable"),
+    (lambda c: c.on_arm_state(Q0, "overcurrent on joint 2."), "fault"),
+])
+def test_refuses_motion_when_unsafe(setup, code):
+    c = ready()
+    setup(c)
+    with pytest.raises(RpcError) as err:
+        c.movj(Q0 + 0.1, 0.0)
+    assert err.value.code == code
+    assert c.state == NOT_CONTROLLING and c.tick(1.0) is None
+
+
+def test_movj_references_then_done_and_busy_meanwhile():
+    c = ready()
+    T = c.movj(Q0 + 0.2, 10.0)
+    assert c.state == MOVJ
+    with pytest.raises(RpcError) as err:
+        c.movj(Q0, 10.1)
+    assert err.value.code == "busy"
+    first = c.tick(10.0)
+    assert np.allclose(first.positions, Q0) and np.allclose(first.velocities, 0)
+    mid = c.tick(10.0 + T / 2)
+    assert np.all(np.array(mid.velocities) > 0)
+    last = c.tick(10.0 + T + 0.01)
+    assert np.allclose(last.positions, Q0 + 0.2)
+    assert c.state == NOT_CONTROLLING and c.wait(0.0) and c.outcome is None
+
+
+def test_out_of_limit_joint_target_is_refused():
+    c = ready()
+    with pytest.raises(RpcError) as err:
+        c.movj(np.radians([0, 140, 0, 0, 0]), 0.0)
+    assert err.value.code == "joint_limit" and "Joint 2" in err.value.message
+
+
+def test_estop_during_motion_aborts_and_holds():
+    c = ready()
+    c.movj(Q0 + 0.2, 0.0)
+    c.tick(0.5)
+    c.on_estop(True, "")
+    assert c.state == NOT_CONTROLLING and c.outcome.code == "estop"
+    hold = c.tick(0.6)
+    assert np.allclose(hold.positions, Q0) and np.allclose(hold.velocities, 0)
+    assert c.tick(0.7) is None
+
+
+def test_movv_integrates_and_lapses_after_watchdog():
+    c = ready()
+    p0 = c.model.fwd(Q0)
+    c.stream(np.array([0.05, 0, 0, 0, 0]), 0.0)
+    assert c.state == MOVV
+    c.tick(0.0)
+    ref = c.tick(0.1)
+    assert c.model.fwd(np.array(ref.positions))[0] == pytest.approx(p0[0] + 0.005, abs=1e-9)
+    c.tick(0.19)
+    ref = c.tick(0.25)   # no refresh for 250 ms
+    assert c.state == NOT_CONTROLLING and c.outcome.code == "timeout"
+    assert np.allclose(ref.velocities, 0)
+
+
+def test_pointer_input_validation_and_direction():
+    with pytest.raises(RpcError):
+        PointerInput.from_request({"direction": "forward"})
+    with pytest.raises(RpcError):
+        PointerInput.from_request({"deadman": True, "direction": "up"})
+    with pytest.raises(RpcError):
+        PointerInput.from_request({"deadman": True, "yaw": float("nan")})
+    pose = np.array([0.5, 0.0, 1.0, math.pi / 2, 0.0])  # tool pointing along +x
+    v = pointer_velocity(pose, PointerInput.from_request({"deadman": True, "direction": "forward"}))
+    assert v[0] == pytest.approx(0.05) and abs(v[2]) < 1e-12
+    v = pointer_velocity(pose, PointerInput.from_request({"deadman": True, "direction": "backward"}))
+    assert v[0] == pytest.approx(-0.05)
+    v = pointer_velocity(pose, PointerInput.from_request({"deadman": True, "yaw": 10.0}))
+    assert v[1] == pytest.approx(0.5 * math.radians(10.0)) and v[0] == pytest.approx(0.0)

@@ -1,0 +1,69 @@
+"""Depth measures known distances (rendered and ray cast alike); RGB and intrinsics are right."""
+
+import cv2
+import mujoco
+import numpy as np
+import pytest
+
+from asibot.sim.cameras import Camera, Intrinsics
+
+
+@pytest.fixture
+def front(apartment):
+    cam = Camera(apartment.model, "front", 160, 120, apartment.scene.base.body)
+    yield cam
+    cam.close()
+
+
+@pytest.mark.parametrize("method", ["render", "ray"])
+def test_depth_of_the_wall_ahead_is_its_distance(apartment, front, method):
+    # The robot starts at x = 1.0 facing +x; the front camera sits 0.32 m ahead of its centre;
+    # the middle wall's west face is at x = 5.0 - 0.05 (worlds/apartment.xml).
+    depth = front.depth(apartment.data, method)
+    assert depth.dtype == np.float32 and depth.shape == (120, 160)
+    patch = depth[50:70, 70:90]
+    assert np.allclose(patch, 4.95 - 1.32, atol=2e-3)
+
+
+def test_render_and_ray_agree_everywhere(apartment, front):
+    a, b = front.depth(apartment.data, "render"), front.depth(apartment.data, "ray")
+    both = (a > 0) & (b > 0)
+    assert both.mean() > 0.9
+    # they may differ only on silhouette edges (rasterised coverage vs the pixel-centre ray)
+    assert np.mean(np.abs(a - b)[both] < 5e-3) > 0.99
+
+
+def test_unknown_depth_method_is_refused(apartment, front):
+    with pytest.raises(ValueError, match="render' or 'ray"):
+        front.depth(apartment.data, "lidar")
+
+
+def test_camera_info_gives_intrinsics_and_the_mounting_pose(apartment, front):
+    info = front.info(apartment.data)
+    assert (info.width, info.height) == (160, 120)
+    assert info.fx == pytest.approx(60 / np.tan(np.radians(22.5)))
+    assert (info.cx, info.cy) == (79.5, 59.5)
+    assert info.pose[:3] == pytest.approx([0.32, 0.0, 0.3])
+    rot = np.zeros(9)
+    mujoco.mju_quat2Mat(rot, np.array(info.pose[3:]))
+    rot = rot.reshape(3, 3)
+    assert rot[:, 2] == pytest.approx([1, 0, 0], abs=1e-9)   # optical axis looks forward
+    assert rot[:, 1] == pytest.approx([0, 0, -1], abs=1e-9)  # image y points down
+
+
+def test_kitchen_rgb_is_a_jpeg_showing_the_red_can(kitchen):
+    cam = Camera(kitchen.model, "kitchen", 320, 240, kitchen.scene.arm_base_body)
+    try:
+        img = cam.rgb_jpeg(kitchen.data)
+    finally:
+        cam.close()
+    bgr = cv2.imdecode(np.frombuffer(img.jpeg, np.uint8), cv2.IMREAD_COLOR)
+    assert bgr.shape == (240, 320, 3) and (img.width, img.height) == (320, 240)
+    b, g, r = (bgr[..., i].astype(int) for i in range(3))
+    red = (r > 120) & (g < 60) & (b < 60)
+    assert red.sum() > 30, "the red can should be in view of the kitchen camera"
+
+
+def test_intrinsics_refuse_tiny_images():
+    with pytest.raises(ValueError, match="at least"):
+        Intrinsics.from_fovy(1, 1, 45)
