@@ -137,17 +137,25 @@ def cmd_recordings(args: argparse.Namespace) -> int:
 
 
 # ---------------------------------------------------------------- replay
-def cmd_replay(args: argparse.Namespace) -> int:
+def _readable_recording(path: str) -> bool:
+    """True when `path` is an MCAP file; otherwise says why on stderr."""
     from asibot.recordings import NotARecording, check_recording
-    from asibot.replay import DEFAULT_EXCLUDE, replay
 
-    if not Path(args.file).exists():
-        print(f"{args.file}: no such recording (see `asibot recordings`)", file=sys.stderr)
-        return 1
+    if not Path(path).is_file():
+        print(f"{path}: no such recording (see `asibot recordings`)", file=sys.stderr)
+        return False
     try:
-        check_recording(args.file)
+        check_recording(path)
     except NotARecording as exc:
         print(exc, file=sys.stderr)
+        return False
+    return True
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from asibot.replay import DEFAULT_EXCLUDE, replay
+
+    if not _readable_recording(args.file):
         return 1
     speed = None if args.fast else args.speed
     stop = _stop_on_signals()
@@ -160,6 +168,25 @@ def cmd_replay(args: argparse.Namespace) -> int:
         n = replay(args.file, bus.put_raw, speed=speed, only=args.only,
                    exclude=list(DEFAULT_EXCLUDE) + args.exclude, stop=stop)
     print(f"replayed {n} messages from {args.file}")
+    return 0
+
+
+# ---------------------------------------------------------------- export
+def cmd_export(args: argparse.Namespace) -> int:
+    from asibot.export import export_foxglove
+
+    if not _readable_recording(args.file):
+        return 1
+    summary = export_foxglove(args.file, args.output)
+    print(f"wrote {summary.messages} messages on {len(summary.schemas)} topics to {summary.output}")
+    if args.verbose:
+        for topic, schema in sorted(summary.schemas.items()):
+            print(f"    {topic:<60} {schema}")
+    if summary.skipped:
+        print(f"skipped {summary.skipped} messages that were not valid (see the recorder's log)")
+    if not summary.complete:
+        print("the recording ends in a truncated chunk (its writer did not finish): exported up to there")
+    print("open it in Foxglove or Lichtblick: File > Open local file")
     return 0
 
 
@@ -191,6 +218,14 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--exclude", action="append", default=[], help="key pattern to skip; repeatable")
     rp.add_argument("--wait", type=float, default=2.0, help="seconds to wait for the router")
     rp.set_defaults(func=cmd_replay)
+
+    ex = sub.add_parser("export", help="convert a recording for Foxglove (JSON, foxglove.* schemas)")
+    ex.add_argument("file")
+    ex.add_argument("--foxglove", action="store_true", default=True,
+                    help="Foxglove's JSON schemas (the only format, and the default)")
+    ex.add_argument("-o", "--output", help="output file (default: foxglove/<name>.mcap beside the recording)")
+    ex.add_argument("-v", "--verbose", action="store_true", help="list topics and their schemas")
+    ex.set_defaults(func=cmd_export)
 
     rc = sub.add_parser("recordings", help="list recordings with duration, topics and counts")
     rc.add_argument("dir", nargs="?", default=os.environ.get("ASIBOT_RECORDINGS", "recordings"))

@@ -9,6 +9,7 @@ yields every message of every complete chunk (the recorder closes a chunk every 
 from __future__ import annotations
 
 import dataclasses
+import struct
 from pathlib import Path
 from typing import Iterator
 
@@ -60,8 +61,8 @@ class Summary:
         return (self.end - self.start) / 1e9 if self.messages else 0.0
 
 
-class _Reading:
-    """Iterates a file's messages and remembers whether it ended cleanly."""
+class Reading:
+    """Iterates a file's messages; afterwards `complete` says whether it ended cleanly."""
 
     def __init__(self, path: Path) -> None:
         self.path = Path(path)
@@ -77,7 +78,7 @@ class _Reading:
                     _schema, channel, message = next(it)
                 except StopIteration:
                     return
-                except (McapError, EOFError, ValueError, OSError, AssertionError, KeyError):
+                except (McapError, EOFError, ValueError, OSError, AssertionError, KeyError, struct.error):
                     # Truncated tail (the reader raises EndOfFile or a decode error on a
                     # half-written record): everything before it has been delivered.
                     self.complete = False
@@ -87,11 +88,11 @@ class _Reading:
 
 def iter_messages(path: Path | str) -> Iterator[Record]:
     """Every readable message in file order (recorded order); tolerates a truncated file."""
-    return iter(_Reading(Path(path)))
+    return iter(Reading(Path(path)))
 
 
 def summarize(path: Path | str) -> Summary:
-    reading = _Reading(Path(path))
+    reading = Reading(Path(path))
     s = Summary(Path(path))
     for rec in reading:
         if s.messages == 0:

@@ -26,6 +26,8 @@ from typing import Sequence
 
 import numpy as np
 
+from asibot.poses import point_rotation
+
 from .errors import JointLimit, Unreachable
 
 A = (0.3, 0.4, 0.4, 0.3)  # A0..A3 [m], asibot.md 1.1
@@ -75,12 +77,8 @@ def tool_frame(x: Sequence[float] | None) -> np.ndarray | None:
 
 def _h(x: Sequence[float]) -> np.ndarray:
     """4x4 transform of a 5-point (degrees)."""
-    a = math.atan2(x[1], x[0])
-    b, g = x[3] * _R, x[4] * _R
-    rz = lambda t: np.array([[math.cos(t), -math.sin(t), 0], [math.sin(t), math.cos(t), 0], [0, 0, 1.0]])
-    ry = np.array([[math.cos(b), 0, math.sin(b)], [0, 1.0, 0], [-math.sin(b), 0, math.cos(b)]])
     h = np.eye(4)
-    h[:3, :3] = rz(a) @ ry @ rz(g)
+    h[:3, :3] = point_rotation(x[0], x[1], x[3] * _R, x[4] * _R)
     h[:3, 3] = x[:3]
     return h
 

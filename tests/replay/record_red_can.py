@@ -1,0 +1,58 @@
+"""Regenerate the replay fixture recordings/fixtures/red_can.mcap.
+
+Runs "Give me the red can" against the simulated kitchen as a user would (`asibot up`, the
+example program), then keeps the ASIBOT's arm and gripper topics of the session's recording.
+Run it after a deliberate change to the kitchen or the controller, and commit the result:
+
+    .venv/bin/python tests/replay/record_red_can.py
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "tests" / "e2e"))
+from conftest import EXAMPLES, Stack  # noqa: E402  the end-to-end tests' `asibot up`
+
+from asibot import keys  # noqa: E402
+from asibot.mcap_writer import LeanWriter  # noqa: E402
+from asibot.recordings import iter_messages  # noqa: E402
+
+ROBOT = "asibot-sim"
+FIXTURE = ROOT / "recordings" / "fixtures" / "red_can.mcap"
+KEEP = (keys.arm_state(ROBOT), keys.arm_command(ROBOT), keys.cart_state(ROBOT),
+        keys.gripper_state(ROBOT), keys.gripper_command(ROBOT))
+
+
+def main() -> int:
+    with tempfile.TemporaryDirectory() as folder:
+        stack = Stack(Path(folder), "sim", ["recorder", "kinematics-asibot-sim"])
+        try:
+            stack.wait_alive("sim/asibot-sim", "kinematics/asibot-sim", "recorder/main")
+            out = stack.run("-u", str(EXAMPLES / "give_me_the_red_can.py"), ROBOT)
+            print(out.stdout, out.stderr)
+            if out.returncode != 0:
+                return 1
+        finally:
+            stack.stop()
+        [session] = (Path(folder) / "recordings").glob("*.mcap")
+        FIXTURE.parent.mkdir(parents=True, exist_ok=True)
+        with open(FIXTURE, "wb") as f:
+            writer = LeanWriter(f, chunk_size=8 << 20, level=19)     # small in git
+            writer.start("", "asibot replay fixture")
+            channels: dict[str, int] = {}
+            for rec in iter_messages(session):
+                if rec.key in KEEP:
+                    if rec.key not in channels:
+                        channels[rec.key] = writer.register_channel(rec.key, "msgpack")
+                    writer.add_message(channels[rec.key], rec.log_time, rec.payload, rec.log_time)
+            writer.finish()
+    print(f"wrote {FIXTURE} ({FIXTURE.stat().st_size} bytes)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
