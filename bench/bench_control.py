@@ -44,6 +44,21 @@ sys.stdin.read()
 """
 
 
+RAW_SERVER = """
+import sys, zenoh
+from asibot.bus import client_config
+s = zenoh.open(client_config(sys.argv[1]))
+pub = s.declare_publisher("bench/raw/command", express=True)
+def handle(query):
+    pub.put(b"x" * 64)            # what a movv handler does: publish the reference, then reply
+    query.reply(query.key_expr, b"{}", express=True)
+    query.drop()
+queryable = s.declare_queryable("bench/raw/movv", handle)
+print("READY", flush=True)
+sys.stdin.read()
+"""
+
+
 def pct(values: list[float], q: float) -> float:
     return float(np.percentile(np.asarray(values), q))
 
@@ -90,6 +105,40 @@ def deployed() -> tuple[list[float], list[float]]:
             p.wait(10)
 
 
+def raw_floor(endpoint: str) -> list[float]:
+    """The same path in raw zenoh-python with nothing of ours: a query whose handler (a
+    Zenoh callback, the fastest way in) publishes 64 bytes, received by a subscriber callback.
+    It is the floor the command path sits on: two trips through the router and back."""
+    import zenoh
+    from asibot.bus import client_config
+
+    server = subprocess.Popen([sys.executable, "-c", RAW_SERVER, endpoint], stdin=subprocess.PIPE,
+                              stdout=subprocess.PIPE, text=True)
+    session = zenoh.open(client_config(endpoint))
+    try:
+        assert server.stdout.readline().strip() == "READY"
+        arrived, got = threading.Event(), []
+        sub = session.declare_subscriber("bench/raw/command",
+                                         lambda sample: (got.append(time.perf_counter()), arrived.set()))
+        time.sleep(0.3)
+        path = []
+        for _ in range(150):
+            time.sleep(0.03)
+            arrived.clear()
+            got.clear()
+            t0 = time.perf_counter()
+            for _reply in session.get("bench/raw/movv", express=True, consolidation=zenoh.ConsolidationMode.NONE):
+                pass
+            if arrived.wait(1.0):
+                path.append(got[0] - t0)
+        sub.undeclare()
+        return path
+    finally:
+        session.close()
+        server.terminate()
+        server.wait(10)
+
+
 def in_process() -> tuple[dict, list[float], list[float]]:
     from asibot.kinematics.server import KinematicsServer
     spec = robots.get(ROBOT)
@@ -117,6 +166,7 @@ def main() -> int:
     with testing.router() as endpoint:
         os.environ["ASIBOT_ROUTER"] = endpoint
         d_rtt, d_path = deployed()
+        raw = raw_floor(endpoint)
         jitter, p_rtt, p_path = in_process()
     ms = 1e3
     rows = [
@@ -131,6 +181,12 @@ def main() -> int:
              pct(path, 50) * ms, "ms", "<= 1"),
             (f"command path client.movv -> arm/command p99, {where}", pct(path, 99) * ms, "ms", "<= 5"),
         ]
+    rows += [
+        (f"raw zenoh-python floor of that path p50, separate processes ({len(raw)} samples)",
+         pct(raw, 50) * ms, "ms", ""),
+        ("raw zenoh-python floor of that path p99, separate processes", pct(raw, 99) * ms, "ms", ""),
+        ("command path p50 over the raw floor, separate processes", pct(d_path, 50) / pct(raw, 50), "x", ""),
+    ]
     print_table((what, f"{value:.3f}", unit, budget) for what, value, unit, budget in rows)
     return 0
 
