@@ -79,7 +79,8 @@ def main() -> int:
     channel = f"bench-{uuid.uuid4().hex[:8]}"
     with testing.router() as endpoint:
         sniffer = Sniffer(channel)
-        emu = emulator.DriveEmulator(can.Bus(interface="virtual", channel=channel), cfg.nodes)
+        emu = emulator.DriveEmulator(can.Bus(interface="virtual", channel=channel), cfg.nodes,
+                                     encoders=emulator.encoders_of(cfg))
         service_bus = Bus("arm_driver", endpoint, wait=5)
         service = ArmDriverService(service_bus, "asibot", f"virtual:{channel}")
         client = Bus("bench", endpoint, wait=5)

@@ -22,6 +22,13 @@ REQUIRED_PDOS = ("tpdo1", "tpdo3", "rpdo1", "rpdo3")
 
 
 @dataclass(frozen=True)
+class AbsoluteEncoder:
+    """The joint's absolute encoder board (asibot.arm_driver.cui) and its sign."""
+    can_id: int
+    reverse: bool = False
+
+
+@dataclass(frozen=True)
 class Joint:
     name: str
     node: int
@@ -29,6 +36,7 @@ class Joint:
     upper: float          # rad
     max_velocity: float   # rad/s
     units: Units
+    absolute: AbsoluteEncoder | None = None
 
 
 @dataclass(frozen=True)
@@ -106,6 +114,18 @@ def _layout(name: str, raw: Any, source: str) -> Layout:
         raise ConfigError(f"{source}: pdo.{name}: {exc}") from None
 
 
+def _absolute(joint: dict, source: str) -> AbsoluteEncoder | None:
+    raw = joint.get("absolute")
+    if raw is None:
+        return None
+    can_id = raw.get("can_id") if isinstance(raw, dict) else None
+    # The board answers on id + 0x180, which must stay a standard 11-bit identifier.
+    if not isinstance(can_id, int) or isinstance(can_id, bool) or not 1 <= can_id <= 0x7FF - 0x180:
+        raise ConfigError(f"{source}: joint {joint['name']}: absolute needs a can_id 1..{0x7FF - 0x180}, "
+                          f"like {{can_id: 102, reverse: false}}; got {raw!r}")
+    return AbsoluteEncoder(can_id, bool(raw.get("reverse", False)))
+
+
 def parse(raw: Any, spec: robots.RobotSpec, source: str = "config") -> ArmConfig:
     """Validate a loaded YAML document against the catalog spec."""
     if not isinstance(raw, dict):
@@ -128,7 +148,11 @@ def parse(raw: Any, spec: robots.RobotSpec, source: str = "config") -> ArmConfig
         joints.append(Joint(
             name=j["name"], node=node, lower=spec.lower[i], upper=spec.upper[i],
             max_velocity=spec.max_velocity[i],
-            units=Units(gear, pulses, sampling, bool(j.get("reverse", False)))))
+            units=Units(gear, pulses, sampling, bool(j.get("reverse", False))),
+            absolute=_absolute(j, source)))
+    ids = [j.absolute.can_id for j in joints if j.absolute] + [j.node for j in joints]
+    if len(ids) != len(set(ids)):
+        raise ConfigError(f"{source}: absolute encoder ids must differ from each other and from the drives' nodes")
     pdos_raw = raw.get("pdo") or {}
     if not isinstance(pdos_raw, dict):
         raise ConfigError(f"{source}: 'pdo' must be a mapping of tpdoN/rpdoN")

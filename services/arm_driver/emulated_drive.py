@@ -77,6 +77,9 @@ class EmulatedDrive:
         self.max_speed_counts = abs(max_speed * counts_per_rad)   # counts/s; OpenRAVE maxveldeg 30
         self.counts_per_rad = counts_per_rad
         self._initial_position = position * counts_per_rad
+        # The incremental counter reads `position`; the joint itself is at position + zero.
+        # They differ after a power cycle, which restarts the counter where the joint stands.
+        self.zero = 0.0
         self.heartbeat_lost = False
         self._power_on()
 
@@ -110,6 +113,7 @@ class EmulatedDrive:
             (objects.INTERPOLATION_PERIOD, 2): -3,
             (objects.SUPPORTED_MODES, 0): objects.SUPPORTS_PP | (objects.SUPPORTS_CSP if self.supports_csp else 0),
             (objects.CONTROLWORD, 0): 0,
+            (objects.SET_ACTUAL_POSITION, 0): 0,
         }
         # Every PDO starts disabled and empty: the master must map what it wants.
         self.tpdos = {n: _Pdo(TPDO_BASE[n] + self.node | PDO_INVALID) for n in range(1, 5)}
@@ -118,8 +122,20 @@ class EmulatedDrive:
         self.nmt = NMT_PRE_OPERATIONAL
 
     def reboot(self) -> None:
-        """Power cycle: object dictionary back to defaults, boot-up message, state switch on disabled."""
+        """Reset (NMT or a supply blip that keeps the counter): object dictionary back to
+        defaults, boot-up message, state switch on disabled."""
         self._power_on()
+
+    def power_cycle(self) -> None:
+        """Switched off and on: as reboot(), and the position counter restarts at 0."""
+        self.zero += self.position
+        self.position = 0.0
+        self._power_on()
+
+    @property
+    def joint_angle(self) -> float:
+        """Where the joint really is, rad (what an absolute encoder on it measures)."""
+        return (self.position + self.zero) / self.counts_per_rad
 
     # ------------------------------------------------------------ observed values
     @property
@@ -378,6 +394,11 @@ class EmulatedDrive:
         if index == objects.CONTROLWORD:
             self._controlword(value, 0.0)
             return 0
+        if index == objects.SET_ACTUAL_POSITION:
+            if self.state is State.OPERATION_ENABLED:
+                return ABORT_DEVICE_STATE       # not while it holds or moves the joint
+            self.zero += self.position - value
+            self.position = self.goal = float(value)
         self.od[(index, sub)] = value
         return 0
 

@@ -1,8 +1,10 @@
 """Five (or any number of) emulated drives on one python-can bus, with fault injection.
 
 One thread reads the bus, routes each frame to the drives it concerns, lets time pass for
-them, and writes their answers back. Faults are injected from any thread:
-over-current (EMCY 0x2310), heartbeat loss, a silent (unplugged) drive, a reboot, and bus-off.
+them, and writes their answers back. Absolute encoder boards (asibot.arm_driver.cui) answer
+polls with their joint's real angle. Faults are injected from any thread: over-current (EMCY
+0x2310), heartbeat loss, a silent (unplugged) drive, a reboot or power cycle, bus-off, and a
+silent or failing encoder board.
 Bus-off is what the master's own controller would report: an error frame with the SocketCAN
 CAN_ERR_BUSOFF class, then no traffic in either direction until it recovers.
 
@@ -23,6 +25,8 @@ from typing import Iterable
 
 import can
 
+from asibot.arm_driver import cui
+from asibot.arm_driver.config import ArmConfig
 from asibot.arm_driver.emulated_drive import EmulatedDrive
 
 log = logging.getLogger(__name__)
@@ -30,6 +34,12 @@ log = logging.getLogger(__name__)
 CAN_ERR_BUSOFF = 0x00000040      # linux/can/error.h error classes, as python-can delivers them
 CAN_ERR_RESTARTED = 0x00000100
 POLL_S = 0.005
+CUI_STEP_DEG = 360.0 / 4096     # the AMT20 is a 12-bit single-turn encoder
+
+
+def encoders_of(config: ArmConfig) -> dict[int, tuple[int, bool]]:
+    """The `encoders` argument that emulates the absolute encoders a configuration names."""
+    return {j.absolute.can_id: (j.node, j.absolute.reverse) for j in config.joints if j.absolute}
 
 
 class DriveEmulator:
@@ -38,11 +48,14 @@ class DriveEmulator:
     def __init__(self, bus: can.BusABC, nodes: Iterable[int] = (1, 2, 3, 4, 5), *,
                  supports_csp: bool = True, max_speed: float = math.radians(30),
                  counts_per_rad: float = 160 * 4096 / (2 * math.pi),
-                 positions: dict[int, float] | None = None) -> None:
+                 positions: dict[int, float] | None = None,
+                 encoders: dict[int, tuple[int, bool]] | None = None) -> None:
         self.bus = bus
         self.drives = {n: EmulatedDrive(n, supports_csp=supports_csp, max_speed=max_speed,
                                         counts_per_rad=counts_per_rad,
                                         position=(positions or {}).get(n, 0.0)) for n in nodes}
+        self.encoders = dict(encoders or {})      # CAN id -> (drive node, reverse)
+        self._encoder_faults: dict[int, str] = {}
         self._silent: set[int] = set()
         self._bus_off_until = 0.0
         self._bus_off_reported = False
@@ -72,6 +85,23 @@ class DriveEmulator:
         with self._lock:
             self._drive(node).reboot()
 
+    def power_cycle(self, node: int) -> None:
+        """Switch one drive off and on: its position counter restarts at 0 where the joint is."""
+        with self._lock:
+            self._drive(node).power_cycle()
+
+    def encoder_fault(self, can_id: int, fault: str | None) -> None:
+        """An absolute encoder board goes 'silent', answers 'error' (the PIC's 0xC4), or None: works."""
+        if can_id not in self.encoders:
+            raise ValueError(f"no emulated absolute encoder with CAN id {can_id}; there are {sorted(self.encoders)}")
+        if fault not in (None, "silent", "error"):
+            raise ValueError("an encoder fault is 'silent', 'error' or None")
+        with self._lock:
+            if fault is None:
+                self._encoder_faults.pop(can_id, None)
+            else:
+                self._encoder_faults[can_id] = fault
+
     def bus_off(self, duration: float) -> None:
         """The master's controller goes bus-off for `duration` seconds."""
         if not (math.isfinite(duration) and duration > 0):
@@ -82,16 +112,23 @@ class DriveEmulator:
             self._error_frame(CAN_ERR_BUSOFF)
 
     def clear(self) -> None:
-        """Plug every drive back in and restore heartbeats (faults stay until reset by the master)."""
+        """Plug every drive and encoder back in and restore heartbeats (drive faults stay until
+        reset by the master)."""
         with self._lock:
             self._silent.clear()
+            self._encoder_faults.clear()
             for d in self.drives.values():
                 d.heartbeat_lost = False
 
     def positions(self) -> dict[int, float]:
-        """Joint positions in rad, per node."""
+        """Joint positions in rad, per node, as the drives count them."""
         with self._lock:
             return {n: d.position / d.counts_per_rad for n, d in self.drives.items()}
+
+    def joint_angles(self) -> dict[int, float]:
+        """Where the joints really are, rad, per node (differs from positions() after a power cycle)."""
+        with self._lock:
+            return {n: d.joint_angle for n, d in self.drives.items()}
 
     def velocities(self) -> dict[int, float]:
         with self._lock:
@@ -133,6 +170,9 @@ class DriveEmulator:
     def _route(self, cob_id: int, data: bytes, now: float) -> None:
         if self._bus_off_until:
             return
+        if cob_id in self.encoders:
+            self._encoder(cob_id, data)
+            return
         if cob_id == 0x080:
             for node, drive in self.drives.items():
                 if node not in self._silent:
@@ -144,9 +184,23 @@ class DriveEmulator:
             if cob_id == 0x000 or cob_id & 0x7F == node:
                 self._send(node, drive.handle(cob_id, data, now))
 
+    def _encoder(self, can_id: int, data: bytes) -> None:
+        """An absolute encoder board answers a poll with its joint's angle, in 12-bit steps."""
+        fault = self._encoder_faults.get(can_id)
+        if data != cui.poll_request() or fault == "silent":
+            return
+        node, reverse = self.encoders[can_id]
+        deg = math.degrees(self.drives[node].joint_angle) * (-1 if reverse else 1)
+        deg = round(deg / CUI_STEP_DEG) * CUI_STEP_DEG
+        reply = bytes([0, 0, 0, cui.PIC_ERROR]) if fault == "error" else cui.angle_reply(deg)
+        self._put([(can_id + cui.REPLY_POLL, reply)])
+
     def _send(self, node: int, frames: list[tuple[int, bytes]]) -> None:
         if node in self._silent or self._bus_off_until:
             return
+        self._put(frames)
+
+    def _put(self, frames: list[tuple[int, bytes]]) -> None:
         for cob_id, data in frames:
             if not data and cob_id & 0x780 == 0x580:
                 continue   # an SDO abort from the client needs no answer

@@ -4,13 +4,15 @@ canopen does the SDO client, NMT commands, heartbeat reception and EMCY decoding
 adds what canopen lacks for a drive master: the PDO configuration sequence without an EDS, the
 CiA 402 enable handshake, per-cycle RPDO + SYNC, and bus-off detection from error frames and
 failed writes. Start-up follows TechnosoftIpos' initialize() (reference/asibot.md 4.3): ping,
-software limits, profile velocity/acceleration, TPDO/RPDO mapping, heartbeat producer, NMT
-start, then shutdown -> switch on -> enable operation.
+absolute encoder sync (a joint with an absolute encoder gets its position counter set from
+it), software limits, profile velocity/acceleration, TPDO/RPDO mapping, heartbeat producer,
+NMT start, then shutdown -> switch on -> enable operation.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from dataclasses import dataclass, field
@@ -19,7 +21,7 @@ import can
 import canopen
 from canopen.objectdictionary import ObjectDictionary
 
-from asibot.arm_driver import cia402, objects
+from asibot.arm_driver import cia402, cui, objects
 from asibot.arm_driver.cia402 import State
 from asibot.arm_driver.config import ArmConfig, Joint
 from asibot.arm_driver.emcy import Emcy
@@ -83,6 +85,10 @@ class CanopenMaster:
         self.bus_off = False
         self.tx_error: str = ""
         self.frames_sent = 0
+        self._absolute: dict[int, bytes] = {}       # encoder CAN id -> its last poll reply
+        for j in config.joints:
+            if j.absolute is not None:
+                self.network.subscribe(j.absolute.can_id + cui.REPLY_POLL, self._on_absolute)
         for j in config.joints:
             node = self.network.add_node(canopen.RemoteNode(j.node, ObjectDictionary()))
             node.sdo.RESPONSE_TIMEOUT = config.sdo_timeout_s
@@ -136,6 +142,11 @@ class CanopenMaster:
             fb.nmt_state = state
             if state == 0:
                 fb.booted = True
+            self._changed.notify_all()
+
+    def _on_absolute(self, cob_id: int, data: bytes, ts: float) -> None:
+        with self._changed:
+            self._absolute[cob_id - cui.REPLY_POLL] = bytes(data)
             self._changed.notify_all()
 
     def _on_emcy(self, node: int, error: canopen.emcy.EmcyError) -> None:
@@ -228,6 +239,8 @@ class CanopenMaster:
         """SDO configuration and PDO mapping of one drive (pre-operational); returns the mode chosen."""
         cfg, joint = self.config, self._joint(node)
         self.read(node, objects.DEVICE_TYPE)                        # SDO ping
+        if joint.absolute is not None and self._counter_may_be_stale(node):
+            self.sync_absolute(joint)
         mode = self._choose_mode(node)
         lo, hi = sorted((joint.units.to_counts(joint.lower), joint.units.to_counts(joint.upper)))
         self.write(node, objects.SOFTWARE_LIMITS, 1, lo)
@@ -255,6 +268,42 @@ class CanopenMaster:
             fb.heartbeat_time = time.monotonic()     # grace: the first heartbeat is one period away
         self.modes[node] = mode
         return mode
+
+    def _counter_may_be_stale(self, node: int) -> bool:
+        """False only for a drive still enabled (one that went quiet and came back without a
+        reset): it kept counting, and it refuses a new counter while it holds the joint."""
+        return cia402.state_of(self.read(node, objects.STATUSWORD)) is not State.OPERATION_ENABLED
+
+    def read_absolute(self, joint: Joint) -> float:
+        """The joint's angle (rad) from its absolute encoder, polled as CuiAbsolute does."""
+        enc = joint.absolute
+        why = "no answer"
+        for _ in range(cui.RETRIES):
+            with self._lock:
+                self._absolute.pop(enc.can_id, None)
+            self._send(enc.can_id, cui.poll_request())
+            deadline = time.monotonic() + cui.TIMEOUT_S
+            with self._changed:
+                while enc.can_id not in self._absolute and (left := deadline - time.monotonic()) > 0:
+                    self._changed.wait(left)
+                reply = self._absolute.pop(enc.can_id, None)
+            if reply is None:
+                why = f"no answer within {cui.TIMEOUT_S:g} s"
+                continue
+            try:
+                return math.radians(cui.parse_angle(reply, enc.reverse))
+            except cui.EncoderError as exc:
+                why = str(exc)
+        raise DriveError(f"The absolute encoder of joint {joint.name} (CAN id {enc.can_id}) gave no position "
+                         f"after {cui.RETRIES} tries ({why}): where the joint is is unknown, so the arm stays "
+                         "off; check the encoder's cable and power, then call reset_fault.")
+
+    def sync_absolute(self, joint: Joint) -> float:
+        """Set the drive's position counter to the absolute encoder's angle; returns it (rad)."""
+        angle = self.read_absolute(joint)
+        self.write(joint.node, objects.SET_ACTUAL_POSITION, 0, joint.units.to_counts(angle))
+        log.info("%s: position set from its absolute encoder: %.2f deg", self._who(joint.node), math.degrees(angle))
+        return angle
 
     def _choose_mode(self, node: int) -> int:
         """Cyclic synchronous position when the drive has it (0x6502 bit 7), else profile position."""

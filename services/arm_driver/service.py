@@ -26,7 +26,8 @@ log = logging.getLogger(__name__)
 SERVICE = "arm_driver"
 DEFAULT_ROBOT = "asibot"
 CAN_ENV = "ASIBOT_ARM_CAN"
-FAULTS = ("over_current", "heartbeat_loss", "silent", "bus_off", "reboot", "clear")
+FAULTS = ("over_current", "heartbeat_loss", "silent", "bus_off", "reboot", "power_cycle",
+          "encoder_silent", "encoder_error", "clear")
 
 
 class ArmDriverService:
@@ -43,7 +44,8 @@ class ArmDriverService:
                                  "synchronous position")
             can_bus, self.emulator = emulation.start_private(
                 canbus.private_channel(), self.config.nodes, supports_csp=spec.channel != "pp",
-                counts_per_rad=self.config.joints[0].units.counts_per_rad)
+                counts_per_rad=self.config.joints[0].units.counts_per_rad,
+                encoders=emulation.encoders_of(self.config))
         else:
             can_bus = canbus.open_bus(spec, self.config.bitrate)
         self._last_event: dict[str, float] = {}
@@ -90,8 +92,8 @@ class ArmDriverService:
             raise RpcError("fault", str(exc)) from None
 
     def _inject_fault(self, request: dict) -> dict:
-        """Emulated bus only: {"fault": over_current|heartbeat_loss|silent|bus_off|reboot|clear,
-        "joint": "q3", "seconds": 0.5 (bus_off)}."""
+        """Emulated bus only: {"fault": one of FAULTS, "joint": "q3", "seconds": 0.5 (bus_off)}.
+        encoder_* faults concern the joint's absolute encoder; clear undoes all but latched ones."""
         fault = request.get("fault")
         if fault not in FAULTS:
             raise RpcError("bad_request", f"fault must be one of {', '.join(FAULTS)}")
@@ -108,9 +110,15 @@ class ArmDriverService:
         joint = request.get("joint")
         if joint not in self.config.names:
             raise RpcError("bad_request", f"joint must be one of {', '.join(self.config.names)}")
-        node = self.config.nodes[self.config.names.index(joint)]
+        j = self.config.joints[self.config.names.index(joint)]
+        if fault.startswith("encoder_"):
+            if j.absolute is None:
+                with_encoder = ", ".join(x.name for x in self.config.joints if x.absolute)
+                raise RpcError("bad_request", f"joint {joint} has no absolute encoder; these do: {with_encoder}")
+            emu.encoder_fault(j.absolute.can_id, fault.removeprefix("encoder_"))
+            return {}
         {"over_current": emu.over_current, "heartbeat_loss": emu.heartbeat_loss,
-         "silent": emu.silent, "reboot": emu.reboot}[fault](node)
+         "silent": emu.silent, "reboot": emu.reboot, "power_cycle": emu.power_cycle}[fault](j.node)
         return {}
 
     # ------------------------------------------------------------ out

@@ -72,6 +72,7 @@ def cfg() -> config.ArmConfig:
 def _rig(cfg: config.ArmConfig, **emulator_options) -> Rig:
     channel = f"test-{uuid.uuid4().hex[:8]}"
     sniffer = Sniffer(channel)
+    emulator_options.setdefault("encoders", emulator.encoders_of(cfg))
     bus, emu = emulator.start_private(channel, cfg.nodes, **emulator_options)
     return Rig(cfg, emu, CanopenMaster(bus, cfg), sniffer)
 
@@ -80,6 +81,21 @@ def _rig(cfg: config.ArmConfig, **emulator_options) -> Rig:
 def rig(cfg):
     """Master + 5 emulated drives (CSP capable); call rig.start_driver() to run the driver."""
     r = _rig(cfg)
+    yield r
+    _close(r)
+
+
+#: Where the joints stand when the arm is switched on in `cold_rig`, rad: q2..q4 away from
+#: zero (their absolute encoders must tell), q1 and q5 at zero as the ASIBOT requires.
+COLD_ANGLES = {1: 0.0, 2: 0.5, 3: -0.4, 4: 0.3, 5: 0.0}
+
+
+@pytest.fixture
+def cold_rig(cfg):
+    """As `rig`, just switched on: every drive counts from 0 wherever its joint stands."""
+    r = _rig(cfg, positions=COLD_ANGLES)
+    for node in cfg.nodes:
+        r.emu.power_cycle(node)
     yield r
     _close(r)
 

@@ -82,6 +82,22 @@ def test_driver_contract_end_to_end(driver_process):
     assert bus.call(keys.driver_rpc(R, "reset_fault"), timeout=10)["ok"]
     wait_until(lambda: states[-1].mode == "idle", 3)
 
+    # q3 switched off and on while its absolute encoder is unplugged: a fault, and no reset
+    # until the encoder answers again; then q3 knows where it stands although it restarted.
+    here = states[-1].positions[2]
+    with pytest.raises(RpcError, match="q1 has no absolute encoder; these do: q2, q3, q4"):
+        bus.call(keys.driver_rpc(R, "inject_fault"), {"fault": "encoder_silent", "joint": "q1"})
+    bus.call(keys.driver_rpc(R, "inject_fault"), {"fault": "encoder_silent", "joint": "q3"})
+    bus.call(keys.driver_rpc(R, "inject_fault"), {"fault": "power_cycle", "joint": "q3"})
+    wait_until(lambda: states[-1].mode == "fault", 3)
+    assert "Drive 3 (joint q3) restarted" in states[-1].fault
+    with pytest.raises(RpcError, match=r"The absolute encoder of joint q3 \(CAN id 103\) gave no position"):
+        bus.call(keys.driver_rpc(R, "reset_fault"), timeout=10)
+    bus.call(keys.driver_rpc(R, "inject_fault"), {"fault": "clear"})
+    assert bus.call(keys.driver_rpc(R, "reset_fault"), timeout=10)["ok"]
+    wait_until(lambda: states[-1].mode == "idle", 3)
+    assert states[-1].positions[2] == pytest.approx(here, abs=math.radians(360 / 4096))
+
     # The controller's liveliness vanishing mid-motion stops the arm.
     controller = Bus("fake-controller", wait=5)
     controller.announce(keys.controller_alive(R))
