@@ -228,6 +228,16 @@ class ArmDriver:
         self._serve_reset()
 
     def _check(self, fb: dict[int, Feedback], now: float) -> None:
+        # A drive is silent when, on the bus's own clock, others spoke well after its heartbeat
+        # was due. Frame time stamps, not the time we read them: a busy machine can stall the
+        # CAN reader, and frames read in a burst afterwards must not make the ones still queued
+        # look missing. A bus on which nobody speaks at all is caught here, after two timeouts.
+        timeout = self.config.heartbeat_timeout
+        heard = max(max(f.heartbeat_time, f.position_time) for f in fb.values())
+        if self._up and now - heard > 2 * timeout:
+            self._enter_fault("bus_silent", 0, f"No drive has said anything on CAN for {now - heard:.2f} s: "
+                              "the arm was stopped; check the drives' power and the CAN cable, then call "
+                              "reset_fault.")
         for j in self.joints:
             f = fb[j.node]
             who = f"Drive {j.node} (joint {j.name})"
@@ -240,7 +250,7 @@ class ArmDriver:
                 self._enter_fault("drive_restarted", j.node, f"{who} restarted (boot-up message): the arm was "
                                   "stopped; check its power supply "
                                   "and that the position it reports is right, then call reset_fault.")
-            elif now - f.heartbeat_time > self.config.heartbeat_timeout:
+            elif self._silent(f, fb, now):
                 self._enter_fault("heartbeat_lost", j.node, f"{who} went silent (no heartbeat for "
                                   f"{now - f.heartbeat_time:.2f} s): the arm was stopped; check its power and "
                                   "CAN cable, then call reset_fault.")
@@ -255,6 +265,14 @@ class ArmDriver:
         if self.master.bus_off:
             self._enter_fault("bus_off", 0, "The CAN controller went bus-off (too many transmission errors): "
                               "the arm was stopped; check the cable, termination and bit rate, then call reset_fault.")
+
+    def _silent(self, f: Feedback, fb: dict[int, Feedback], now: float) -> bool:
+        timeout = self.config.heartbeat_timeout
+        if now - f.heartbeat_time <= timeout:
+            return False
+        if len(fb) == 1 or f.heartbeat_stamp is None:
+            return True
+        return max(g.stamp for g in fb.values()) - f.heartbeat_stamp > timeout
 
     def _enter_fault(self, code: str, node: int, sentence: str) -> None:
         if (code, node) in self._reported:
@@ -323,7 +341,7 @@ class ArmDriver:
         now = time.monotonic()
         fb = self.master.snapshot()
         lost = [j.node for j in self.joints
-                if j.node not in self._up or fb[j.node].booted or now - fb[j.node].heartbeat_time > self.config.heartbeat_timeout]
+                if j.node not in self._up or fb[j.node].booted or self._silent(fb[j.node], fb, now)]
         log.info("resetting the fault; re-initialising drives %s", lost or "none")
         self._bring_up(lost)
         self.master.snapshot()          # the error-reset EMCYs of this reset are not news

@@ -53,9 +53,18 @@ class Feedback:
     der: int = 0
     position_time: float = 0.0
     heartbeat_time: float = 0.0
+    # The same moments on the bus's clock (frame time stamps), which a stalled reader cannot
+    # compress: None until a heartbeat arrives after configuration.
+    heartbeat_stamp: float | None = None
+    stamp: float = 0.0           # the newest frame from this drive, bus clock
     nmt_state: int | None = None
     booted: bool = False         # a boot-up message arrived since we configured the drive
     emcys: list[Emcy] = field(default_factory=list)
+
+
+def _bus_time(ts: float | None) -> float:
+    """A frame's time stamp; an adapter that gives none gets the time it was read."""
+    return ts if ts else time.time()
 
 
 class _ErrorFrames(can.Listener):
@@ -97,11 +106,11 @@ class CanopenMaster:
             for layout in config.pdos.values():
                 if layout.kind == "tpdo":
                     self.network.subscribe(layout.cob_id(j.node),
-                                           lambda cob, data, ts, n=j.node, lay=layout: self._on_tpdo(n, lay, data))
+                                           lambda cob, data, ts, n=j.node, lay=layout: self._on_tpdo(n, lay, data, ts))
         self.network.connect()
 
     # ------------------------------------------------------------ receive side (notifier thread)
-    def _on_tpdo(self, node: int, layout: Layout, data: bytes) -> None:
+    def _on_tpdo(self, node: int, layout: Layout, data: bytes, ts: float) -> None:
         try:
             values = layout.decode(bytes(data))
         except ValueError as exc:
@@ -110,6 +119,7 @@ class CanopenMaster:
         now = time.monotonic()
         with self._changed:
             fb = self.feedback[node]
+            fb.stamp = max(fb.stamp, _bus_time(ts))
             sw = values.get(objects.STATUSWORD)
             if sw is None and objects.MANUFACTURER_STATUS in values:
                 sw = values[objects.MANUFACTURER_STATUS] & 0xFFFF    # iPOS: low word of 0x1002
@@ -139,6 +149,8 @@ class CanopenMaster:
         with self._changed:
             fb = self.feedback[node]
             fb.heartbeat_time = time.monotonic()
+            fb.heartbeat_stamp = _bus_time(ts)
+            fb.stamp = max(fb.stamp, fb.heartbeat_stamp)
             fb.nmt_state = state
             if state == 0:
                 fb.booted = True
@@ -266,6 +278,7 @@ class CanopenMaster:
             fb = self.feedback[node]
             fb.booted = False
             fb.heartbeat_time = time.monotonic()     # grace: the first heartbeat is one period away
+            fb.heartbeat_stamp = None
         self.modes[node] = mode
         return mode
 

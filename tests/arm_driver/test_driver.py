@@ -229,3 +229,18 @@ def test_status_reports_limits_in_si(rig):
     assert s["names"] == ["q1", "q2", "q3", "q4", "q5"]
     assert s["upper"][1] == pytest.approx(math.radians(135)) and s["max_velocity"][0] == pytest.approx(V)
     assert {x["mode"] for x in s["drives"]} == {"cyclic synchronous position"}
+
+
+def test_a_stalled_driver_does_not_blame_the_drives_but_a_dead_bus_is_a_fault(rig):
+    """A busy machine can stall this process past a heartbeat timeout: the frames wait in
+    the CAN reader's queue. That must not read as five dead drives. A bus on which nobody
+    speaks for two timeouts is a fault."""
+    up(rig)
+    with rig.master._lock:                  # the CAN reader and the control loop both wait
+        time.sleep(0.2)                     # every heartbeat overdue (timeout 0.15 s)
+    time.sleep(0.3)
+    assert rig.last.mode == "idle" and not [e for e in rig.events if e[0] == "error"]
+    for n in rig.cfg.nodes:
+        rig.emu.silent(n)
+    wait_until(lambda: rig.last.mode == "fault", 2)
+    assert rig.last.fault.startswith("No drive has said anything on CAN for 0.3")
