@@ -177,7 +177,12 @@ def cmd_export(args: argparse.Namespace) -> int:
 
     if not _readable_recording(args.file):
         return 1
-    summary = export_foxglove(args.file, args.output)
+    try:
+        summary = export_foxglove(args.file, args.output)
+    except OSError as exc:
+        print(f"could not write the export ({exc.strerror or exc}): choose a folder you can write to "
+              "with -o", file=sys.stderr)
+        return 1
     print(f"wrote {summary.messages} messages on {len(summary.schemas)} topics to {summary.output}")
     if args.verbose:
         for topic, schema in sorted(summary.schemas.items()):

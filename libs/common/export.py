@@ -155,9 +155,10 @@ def _camera_of(key: str) -> str:
     return parts[parts.index("camera") + 1] if "camera" in parts[:-1] else "camera"
 
 
-def _camera_frame(key: str, msg: dict | None = None) -> str:
-    frame = (msg or {}).get("frame") or f"{_camera_of(key)}_optical"
-    return f"{_robot_of(key)}/{frame}"
+def _camera_frame(key: str) -> str:
+    """`<robot>/<camera>_optical`, from the key alone, so the images (which carry no frame)
+    and the calibration and transform of their camera always agree."""
+    return f"{_robot_of(key)}/{_camera_of(key)}_optical"
 
 
 def _base_frame(key: str) -> str:

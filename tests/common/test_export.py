@@ -234,6 +234,11 @@ def test_the_command_line(tmp_path, capsys):
     assert "foxglove.RawImage" in out
     assert asibot(["export", str(tmp_path / "missing.mcap")]) == 1
     assert "no such recording" in capsys.readouterr().err
+    (tmp_path / "a-file").write_text("")
+    assert asibot(["export", str(src), "-o", str(tmp_path / "a-file" / "out.mcap")]) == 1
+    assert "could not write the export" in capsys.readouterr().err
+    assert asibot(["export", str(src), "-o", str(src)]) == 2
+    assert "would overwrite the recording" in capsys.readouterr().err
     # Exports live apart from the recordings, so `asibot recordings` does not list them.
     assert asibot(["recordings", str(tmp_path)]) == 0
     assert "foxglove" not in capsys.readouterr().out
