@@ -50,7 +50,7 @@ class ExportSummary:
     source: Path
     output: Path
     messages: int = 0          # messages written
-    skipped: int = 0           # payloads that were not valid MessagePack
+    skipped: int = 0           # payloads that were not MessagePack, or not a valid message
     schemas: dict[str, str] = dataclasses.field(default_factory=dict)   # topic -> schema name
     complete: bool = True      # False when the source ended in a truncated chunk
 

@@ -8,24 +8,22 @@ Rz(azimuth) Ry(rot y') Rz(rot z'').
 from __future__ import annotations
 
 import math
-from typing import Sequence
-
 import numpy as np
 
 
-def rot_z(t: float) -> np.ndarray:
+def _rot_z(t: float) -> np.ndarray:
     c, s = math.cos(t), math.sin(t)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def rot_y(t: float) -> np.ndarray:
+def _rot_y(t: float) -> np.ndarray:
     c, s = math.cos(t), math.sin(t)
     return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
 def point_rotation(x: float, y: float, rot_y_rad: float, rot_z_rad: float) -> np.ndarray:
     """The 3x3 orientation of a point at (x, y, ...) with its two explicit rotations in rad."""
-    return rot_z(math.atan2(y, x)) @ rot_y(rot_y_rad) @ rot_z(rot_z_rad)
+    return _rot_z(math.atan2(y, x)) @ _rot_y(rot_y_rad) @ _rot_z(rot_z_rad)
 
 
 def quaternion_wxyz(r: np.ndarray) -> list[float]:
@@ -52,12 +50,3 @@ def yaw_quaternion_wxyz(theta: float) -> list[float]:
     """A rotation of `theta` rad about z, as (w, x, y, z)."""
     return [math.cos(theta / 2), 0.0, 0.0, math.sin(theta / 2)]
 
-
-def matrix_of_quaternion(q: Sequence[float]) -> np.ndarray:
-    """3x3 rotation of a (w, x, y, z) quaternion."""
-    w, x, y, z = np.asarray(q, float) / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])

@@ -29,6 +29,7 @@ import mujoco
 import numpy as np
 
 from asibot import messages as m
+from asibot.poses import quaternion_wxyz
 from asibot.sim.scene import ROBOT_GROUP
 
 MAX_DEPTH_M = 8.0
@@ -62,12 +63,6 @@ class Intrinsics:
         return (d / np.linalg.norm(d, axis=-1, keepdims=True)).reshape(-1, 3)
 
 
-def _quat_of(r: np.ndarray) -> list[float]:
-    q = np.zeros(4)
-    mujoco.mju_mat2Quat(q, np.ascontiguousarray(r).reshape(9))
-    return q.tolist()
-
-
 class Camera:
     """One camera of the world, with its intrinsics and its pose on the robot."""
 
@@ -97,7 +92,7 @@ class Camera:
         rot = rb.T @ self.optical_rotation(data)
         i = self.intr
         return m.CameraInfo(width=i.width, height=i.height, fx=i.fx, fy=i.fy, cx=i.cx, cy=i.cy,
-                            pose=pos.tolist() + _quat_of(rot), frame=f"{self.name}_optical")
+                            pose=pos.tolist() + quaternion_wxyz(rot), frame=f"{self.name}_optical")
 
     # ------------------------------------------------------------------ images
     def depth_ray(self, data: mujoco.MjData) -> np.ndarray:

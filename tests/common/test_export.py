@@ -22,11 +22,19 @@ from asibot import keys, messages as m
 from asibot.cli import main as asibot
 from asibot.export import export_foxglove
 from asibot.mcap_writer import LeanWriter
-from asibot.poses import matrix_of_quaternion, point_rotation
+from asibot.poses import point_rotation
 from asibot.recordings import NotARecording
 
 T0 = 1_795_000_000_123_456_789
 ROBOT, BASE = "asibot-sim", "pioneer-sim"
+
+
+def matrix_of_quaternion(q) -> np.ndarray:
+    """3x3 rotation of a (w, x, y, z) quaternion: the export's quaternion, checked independently."""
+    w, x, y, z = np.asarray(q, float) / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
 def write_recording(path: Path, items: list[tuple[str, bytes]], *, finish: bool = True) -> None:
