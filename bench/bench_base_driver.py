@@ -1,7 +1,7 @@
 """Benchmark of the Pioneer base driver against the in-process ARCOS emulator over loopback TCP.
 
 Prints one markdown table: ARCOS command round trip (VEL sent -> the next SIP shows the
-robot reacting; bounded by the 100 ms SIP cycle of ros.md 1.5), SIP parse time, and the
+robot reacting; bounded by the 100 ms SIP cycle, docs/arcos.md "SIP"), SIP parse time, and the
 latency from a cmd_vel published on Zenoh to its VEL bytes arriving on the serial line.
 """
 

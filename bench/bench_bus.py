@@ -20,14 +20,16 @@ import numpy as np
 import zenoh
 
 from asibot import messages as m
-from asibot.bus import Bus, client_config
-from asibot.recorder import RecorderService
+from asibot.bus import Bus
+from asibot.bus.zenoh_backend import client_config
+from asibot.recording.recorder import RecorderService
 from asibot.testing import router
 
 ECHO = r"""
 import sys, threading, zenoh
 from asibot import messages as m
-from asibot.bus import Bus, client_config
+from asibot.bus import Bus
+from asibot.bus.zenoh_backend import client_config
 mode = sys.argv[1]
 if mode == "ours":
     bus = Bus("echo")

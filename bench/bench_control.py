@@ -14,7 +14,6 @@ import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -23,20 +22,16 @@ from asibot.bus import Bus
 from asibot.client import CartesianClient
 from asibot.kinematics.model import solver_for
 from asibot.messages import ArmCommand
+from asibot.testing import IdealDriver
 
 from table import print_table  # bench/table.py: run as `python bench/<name>.py`
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests" / "kinematics"))
-from ideal_driver import IdealDriver  # noqa: E402  the tests' ideal driver
 
 ROBOT = "asibot-sim"
 START = np.radians([0, 30, 40, 30, 0])
 DRIVER = f"""
-import sys, time, numpy as np
-sys.path.insert(0, {str(ROOT / 'tests' / 'kinematics')!r})
+import sys, numpy as np
 from asibot import robots
-from ideal_driver import IdealDriver
+from asibot.testing import IdealDriver
 d = IdealDriver({ROBOT!r}, robots.get({ROBOT!r}))
 d.set_joints(np.radians([0, 30, 40, 30, 0]))
 print("READY", flush=True)
@@ -46,7 +41,7 @@ sys.stdin.read()
 
 RAW_SERVER = """
 import sys, zenoh
-from asibot.bus import client_config
+from asibot.bus.zenoh_backend import client_config
 s = zenoh.open(client_config(sys.argv[1]))
 pub = s.declare_publisher("bench/raw/command", express=True)
 def handle(query):
@@ -110,7 +105,7 @@ def raw_floor(endpoint: str) -> list[float]:
     Zenoh callback, the fastest way in) publishes 64 bytes, received by a subscriber callback.
     It is the floor the command path sits on: two trips through the router and back."""
     import zenoh
-    from asibot.bus import client_config
+    from asibot.bus.zenoh_backend import client_config
 
     server = subprocess.Popen([sys.executable, "-c", RAW_SERVER, endpoint], stdin=subprocess.PIPE,
                               stdout=subprocess.PIPE, text=True)

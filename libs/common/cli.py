@@ -1,4 +1,4 @@
-"""The `asibot` command: up, status, router, replay, recordings."""
+"""The `asibot` command: up, status, router, estop, release, reset-fault, replay, export, recordings."""
 
 from __future__ import annotations
 
@@ -10,8 +10,9 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Callable
 
-from asibot import keys
+from asibot import keys, messages
 from asibot.bus import DEFAULT_ROUTER, ROUTER_ENV, Bus, open_router, router_endpoint
 from asibot.errors import AsibotError
 
@@ -99,7 +100,7 @@ def cmd_status(args: argparse.Namespace) -> int:
         health: dict[str, dict] = {}
         if args.health:
             from asibot.messages import Health
-            bus.subscribe("health/**", Health, lambda k, h: health.__setitem__(k, h), with_key=True)
+            bus.subscribe(keys.ALL_HEALTH, Health, lambda k, h: health.__setitem__(k, h), with_key=True)
             time.sleep(2.2)
         alive = bus.alive(keys.ALL_SERVICES)
     if not alive:
@@ -117,9 +118,76 @@ def cmd_status(args: argparse.Namespace) -> int:
     return 0
 
 
+# ---------------------------------------------------------------- safety
+def _who() -> str:
+    import getpass
+    import socket
+    try:
+        return f"{getpass.getuser()}@{socket.gethostname()}"
+    except Exception:  # no user name in some containers
+        return socket.gethostname()
+
+
+def _driver_estop(bus: Bus, robot: str) -> bool | None:
+    """What the robot's driver says of its estop; None when it cannot say."""
+    try:
+        return bool(bus.call(keys.driver_rpc(robot, "status"), timeout=1.0).get("estop"))
+    except AsibotError:
+        return None
+
+
+def cmd_estop(args: argparse.Namespace) -> int:
+    with Bus("estop", wait=args.wait) as bus:
+        robots = args.robots or sorted(keys.robot_of(k) or k for k in bus.alive(keys.ALL_DRIVERS))
+        if not robots:
+            print("No robot is live (no driver is running): there is nothing to stop.", file=sys.stderr)
+            return 1
+        reason = f"asibot estop by {_who()}"
+        for robot in robots:
+            bus.latch(keys.estop(robot), messages.EStop(engaged=True, reason=reason))
+        code = 0
+        for robot in robots:
+            engaged = _wait_for(lambda r=robot: _driver_estop(bus, r), 2.0)
+            if engaged:
+                print(f"{robot}: stopped; the emergency stop holds until `asibot release {robot}`")
+            else:
+                print(f"{robot}: the stop was sent, but its driver did not confirm it: check the robot",
+                      file=sys.stderr)
+                code = 1
+    return code
+
+
+def cmd_release(args: argparse.Namespace) -> int:
+    with Bus("release", wait=args.wait) as bus:
+        bus.latch(keys.estop(args.robot), messages.EStop(engaged=False, reason=f"released by {_who()}"))
+        if _wait_for(lambda: _driver_estop(bus, args.robot) is False, 2.0):
+            print(f"{args.robot}: emergency stop released; it moves again only on a new motion request")
+            return 0
+    print(f"{args.robot}: the release was sent, but no driver of {args.robot} confirmed it "
+          "(`asibot status` lists the running services)", file=sys.stderr)
+    return 1
+
+
+def cmd_reset_fault(args: argparse.Namespace) -> int:
+    with Bus("reset-fault", wait=args.wait) as bus:
+        reply = bus.call(keys.driver_rpc(args.robot, "reset_fault"), timeout=10.0)
+    reply.pop("ok", None)
+    print(f"{args.robot}: fault cleared" + (f" {reply}" if reply else ""))
+    return 0
+
+
+def _wait_for(condition: Callable[[], object], timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+    return True
+
+
 # ---------------------------------------------------------------- recordings
 def cmd_recordings(args: argparse.Namespace) -> int:
-    from asibot.recordings import list_recordings
+    from asibot.recording.reader import list_recordings
 
     found = list_recordings(args.dir)
     if not found:
@@ -139,7 +207,7 @@ def cmd_recordings(args: argparse.Namespace) -> int:
 # ---------------------------------------------------------------- replay
 def _readable_recording(path: str) -> bool:
     """True when `path` is an MCAP file; otherwise says why on stderr."""
-    from asibot.recordings import NotARecording, check_recording
+    from asibot.recording.reader import NotARecording, check_recording
 
     if not Path(path).is_file():
         print(f"{path}: no such recording (see `asibot recordings`)", file=sys.stderr)
@@ -153,10 +221,17 @@ def _readable_recording(path: str) -> bool:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from asibot.replay import DEFAULT_EXCLUDE, replay
+    from asibot.recording.replay import DEFAULT_EXCLUDE, LiveGuard, replay
 
     if not _readable_recording(args.file):
         return 1
+    if args.prefix is not None:
+        try:
+            keys.robot(args.prefix)  # a prefix is one key chunk, like a robot id
+        except ValueError:
+            print(f"--prefix must be one name of letters, digits, '_', '-' or '.', not {args.prefix!r}",
+                  file=sys.stderr)
+            return 2
     speed = None if args.fast else args.speed
     stop = _stop_on_signals()
     try:
@@ -165,15 +240,34 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print(exc, file=sys.stderr)
         return 1
     with bus:
-        n = replay(args.file, bus.put_raw, speed=speed, only=args.only,
-                   exclude=list(DEFAULT_EXCLUDE) + args.exclude, stop=stop)
+        # Ask before watching: zenoh 1.x may answer a liveliness query made just after a
+        # liveliness subscriber was declared with nothing.
+        live = sorted(keys.robot_of(k) or k for k in bus.alive(keys.ALL_DRIVERS))
+        guard = LiveGuard()
+        bus.watch(keys.ALL_DRIVERS, guard.on_driver)
+        if live and not args.into_live and args.prefix is None:
+            print(f"Not replaying: the robots {', '.join(live)} are live (their drivers run), and the "
+                  "recording's commands would move them. Stop the stack first, or replay beside it "
+                  "with --prefix NAME (keys become NAME/...), or pass --into-live if you mean to drive "
+                  "the live robots with the recording.", file=sys.stderr)
+            return 2
+        if args.into_live and live:
+            print(f"warning: replaying INTO the live robots {', '.join(live)}: their recorded commands "
+                  "will move them. Ctrl-C stops the replay; `asibot estop` stops the robots.", file=sys.stderr)
+        put = bus.put_raw if args.prefix is None else (lambda k, p: bus.put_raw(f"{args.prefix}/{k}", p))
+        n = replay(args.file, put, speed=speed, only=args.only,
+                   exclude=list(DEFAULT_EXCLUDE) + args.exclude, stop=stop,
+                   allows=None if (args.into_live or args.prefix is not None) else guard.allows)
     print(f"replayed {n} messages from {args.file}")
+    if guard.held:
+        print(f"held back {guard.held} commands because a driver came alive during the replay "
+              f"({', '.join(sorted(guard.drivers))})")
     return 0
 
 
 # ---------------------------------------------------------------- export
 def cmd_export(args: argparse.Namespace) -> int:
-    from asibot.export import export_foxglove
+    from asibot.recording.export import export_foxglove
 
     if not _readable_recording(args.file):
         return 1
@@ -222,6 +316,10 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--only", action="append", default=[], help="key pattern to replay; repeatable")
     rp.add_argument("--exclude", action="append", default=[], help="key pattern to skip; repeatable")
     rp.add_argument("--wait", type=float, default=2.0, help="seconds to wait for the router")
+    live = rp.add_mutually_exclusive_group()
+    live.add_argument("--prefix", help="republish every key under PREFIX/ (beside a live stack, moving nothing)")
+    live.add_argument("--into-live", action="store_true",
+                      help="replay commands into live robots too (they will move as recorded)")
     rp.set_defaults(func=cmd_replay)
 
     ex = sub.add_parser("export", help="convert a recording for Foxglove (JSON, foxglove.* schemas)")
@@ -231,6 +329,19 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("-o", "--output", help="output file (default: foxglove/<name>.mcap beside the recording)")
     ex.add_argument("-v", "--verbose", action="store_true", help="list topics and their schemas")
     ex.set_defaults(func=cmd_export)
+
+    es = sub.add_parser("estop", help="emergency stop: stop robots now and refuse motion until released")
+    es.add_argument("robots", nargs="*", help="robot ids (default: every live robot)")
+    es.add_argument("--wait", type=float, default=2.0, help="seconds to wait for the router")
+    es.set_defaults(func=cmd_estop)
+    rl = sub.add_parser("release", help="release a robot's emergency stop")
+    rl.add_argument("robot")
+    rl.add_argument("--wait", type=float, default=2.0, help="seconds to wait for the router")
+    rl.set_defaults(func=cmd_release)
+    rf = sub.add_parser("reset-fault", help="ask a robot's driver to clear its fault")
+    rf.add_argument("robot")
+    rf.add_argument("--wait", type=float, default=2.0, help="seconds to wait for the router")
+    rf.set_defaults(func=cmd_reset_fault)
 
     rc = sub.add_parser("recordings", help="list recordings with duration, topics and counts")
     rc.add_argument("dir", nargs="?", default=os.environ.get("ASIBOT_RECORDINGS", "recordings"))

@@ -1,4 +1,4 @@
-"""The user's Python API (DESIGN.md): a thin, blocking wrapper over the kinematics and nav RPC.
+"""The user's Python API (README, "Programming the arm"): a thin, blocking wrapper over the kinematics and nav RPC.
 
 Points are the seed's [x, y, z, rot(y'), rot(z'')] in m and deg, joints in deg. Every call
 has a timeout; a refusal raises asibot.errors.RpcError (code + the server's sentence).
@@ -13,6 +13,7 @@ from typing import Sequence
 from asibot import keys
 from asibot.bus import Bus
 from asibot.errors import RpcError, Timeout
+from asibot.messages import EStop
 
 #: Per-call timeout for quick verbs, s.
 CALL_TIMEOUT = 5.0
@@ -50,11 +51,10 @@ class CartesianClient:
         self.close()
 
     def _call(self, verb: str, _timeout: float | None = None, _nav: bool = False, **request: object) -> dict:
-        if self._bus is None or self.robot is None:
-            raise RpcError("bad_request", "Call open(robot) first.")
+        bus = self._connected()
         key = keys.nav_rpc(self.robot, verb) if _nav else keys.cart_rpc(self.robot, verb)
         body = {k: list(v) if isinstance(v, (tuple, list)) else v for k, v in request.items() if v is not None}
-        return self._bus.call(key, body, timeout=_timeout or self.timeout)
+        return bus.call(key, body, timeout=_timeout or self.timeout)
 
     # --- the seed's verbs ---------------------------------------------------------------
     def stat(self, res: list | None = None) -> list[float]:
@@ -110,7 +110,11 @@ class CartesianClient:
     def stop(self) -> None:
         self._call("stop")
 
-    def tool(self, tool: Sequence[float]) -> None:
+    def tool(self, tool: Sequence[float] | None = None) -> None:
+        """Attach a tool frame: [x, y, z, rx, ry, rz] in m and deg, like points: the tool point's
+        offset from the flange (other arms: from their approach frame) and its rotation as a
+        rotation vector (axis times angle in deg). From then on points (stat, inv, movj, movl,
+        ...) are the tool point's. None (or all zeros) removes it."""
         self._call("tool", tool=tool)
 
     def act(self, action: str) -> dict:
@@ -121,6 +125,27 @@ class CartesianClient:
     def grip(self, close: bool = True) -> bool:
         """Close (or open) the gripper; True when it holds something afterwards."""
         return self.act("close" if close else "open")["holding"]
+
+    # --- safety ----------------------------------------------------------------------------
+    def estop(self, reason: str = "emergency stop from a program") -> None:
+        """Engage the robot's emergency stop: it stops at once and refuses every motion until
+        release(). The drivers and the controller latch it, so it holds after this program ends."""
+        self._connected().latch(keys.estop(self.robot), EStop(engaged=True, reason=reason))
+
+    def release(self, reason: str = "released from a program") -> None:
+        """Release the emergency stop. Nothing moves by itself afterwards: the robot moves again
+        only on a motion request made after the release."""
+        self._connected().latch(keys.estop(self.robot), EStop(engaged=False, reason=reason))
+
+    def reset_fault(self) -> dict:
+        """Ask the robot's driver to clear a fault (re-initialise the drive that failed);
+        raises RpcError with the driver's sentence when the fault is still there."""
+        return self._connected().call(keys.driver_rpc(self.robot, "reset_fault"), timeout=self.timeout)
+
+    def _connected(self) -> Bus:
+        if self._bus is None or self.robot is None:
+            raise RpcError("bad_request", "Call open(robot) first.")
+        return self._bus
 
     # --- mobile robot verbs (nav service) -------------------------------------------------
     def goto(self, place: str, timeout: float = 10.0) -> dict:

@@ -15,6 +15,16 @@ CODES = (
 )
 
 
+#: Longest sentence an error carries: a reply never echoes a megabyte of bad input back.
+MAX_MESSAGE = 400
+
+
+def quote(value: object, limit: int = 60) -> str:
+    """`repr(value)`, cut to `limit` characters: how an error sentence shows bad input."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"
+
+
 class AsibotError(Exception):
     """Base of every error this stack raises on purpose."""
 
@@ -35,10 +45,11 @@ class RpcError(AsibotError):
             code, message = type(self).code, ""
         else:
             raise TypeError("RpcError takes (code, message) or (message)")
-        if code not in CODES:
-            code = "internal"
+        if code not in CODES:  # a typo at a raise site: fail loudly where tests see it
+            raise ValueError(f"unknown RPC error code {code!r}; use one of {', '.join(CODES)}")
         self.code = code
-        self.message = message or code.replace("_", " ")
+        message = message or code.replace("_", " ")
+        self.message = message if len(message) <= MAX_MESSAGE else message[:MAX_MESSAGE] + "..."
         super().__init__(self.message)
 
     def __str__(self) -> str:

@@ -150,8 +150,17 @@ def health(service_name: str, instance: str) -> str:
 
 
 ALL_SERVICES = "svc/**"
+ALL_HEALTH = "health/**"
+ALL_DRIVERS = "rb/*/driver/alive"
 EVERYTHING = "**"
 
+#: What, after `rb/<robot>/`, moves a robot or changes what it may do (besides every RPC).
+_COMMAND_RESTS = ("arm/command", "gripper/command", "base/cmd_vel", "estop")
+
+
+# ---------------------------------------------------------------- parsing
+# The inverse of the functions above, for code that meets keys it did not build (status,
+# recordings, exports). Wildcard patterns are not keys: they parse as nothing.
 
 def parse_service(key: str) -> tuple[str, str]:
     """Split `svc/<service>/<instance>` into its two names."""
@@ -159,3 +168,45 @@ def parse_service(key: str) -> tuple[str, str]:
     if len(parts) != 3 or parts[0] != "svc":
         raise ValueError(f"{key!r} is not a service liveliness key (svc/<service>/<instance>)")
     return parts[1], parts[2]
+
+
+def parse_robot(key: str) -> tuple[str, str]:
+    """Split `rb/<robot>/<rest>` into the robot id and the rest after it.
+
+    `parse_robot("rb/asibot/arm/state") == ("asibot", "arm/state")`; the bare prefix
+    `rb/<robot>` gives an empty rest. Raises ValueError for any other key.
+    """
+    parts = key.split("/", 2) if isinstance(key, str) else []
+    if len(parts) < 2 or parts[0] != "rb" or not _NAME.match(parts[1]):
+        raise ValueError(f"{key!r} is not a robot key (rb/<robot>/...)")
+    return parts[1], parts[2] if len(parts) == 3 else ""
+
+
+def robot_of(key: str) -> str | None:
+    """The robot id of a `rb/<robot>/...` key; None for keys that belong to no robot."""
+    try:
+        return parse_robot(key)[0]
+    except ValueError:
+        return None
+
+
+def camera_of(key: str) -> str | None:
+    """The camera name of `rb/<robot>/camera/<name>/<stream>` (depth, rgb, info); None otherwise."""
+    try:
+        _, rest = parse_robot(key)
+    except ValueError:
+        return None
+    parts = rest.split("/")
+    if len(parts) == 3 and parts[0] == "camera" and _NAME.match(parts[1]) and parts[2]:
+        return parts[1]
+    return None
+
+
+def is_command(key: str) -> bool:
+    """Whether publishing on `key` can move a robot or change what it may do: its commands,
+    its estop and every RPC. Tools that republish (replay) keep off these near live drivers."""
+    try:
+        _, rest = parse_robot(key)
+    except ValueError:
+        return False
+    return rest in _COMMAND_RESTS or "/rpc/" in f"/{rest}/"

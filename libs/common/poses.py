@@ -1,7 +1,7 @@
 """Orientation conventions shared by the kinematics and the tools that show its poses.
 
 A Cartesian point is [x, y, z, rot(y'), rot(z'')]: the first rotation is implied, about z by
-the azimuth atan2(y, x) of the point (reference asibot.md 1.1), so its orientation is
+the azimuth atan2(y, x) of the point (docs/asibot-conventions.md, "Kinematics"), so its orientation is
 Rz(azimuth) Ry(rot y') Rz(rot z'').
 """
 

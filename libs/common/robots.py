@@ -1,9 +1,9 @@
 """The robot catalog: one source of truth for joint names, limits, speeds and models.
 
 Drivers, the simulation and the kinematics service all read it, so that a limit is
-changed in one place. Numbers: ASIBOT from /work/shared/reference/asibot.md 1.1-1.2
+changed in one place. Numbers: ASIBOT from docs/asibot-conventions.md, "Kinematics"
 (limits +-360/+-135 deg, 25 deg/s maxVel of the real drives, home all zeros); Katana
-300 6M180 from /work/shared/reference/ros.md 2.2 (limits and vel_enc2rad(180) speeds).
+300 6M180 from docs/katana.md (limits and vel_enc2rad(180) speeds).
 """
 
 from __future__ import annotations

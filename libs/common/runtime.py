@@ -1,9 +1,17 @@
 """The service runtime: what every service's `__main__` shares.
 
-A service is `build(bus, args) -> object`. The runtime parses the common flags, connects
-(waiting for the router), announces the service, publishes Health every 2 s, and on
-SIGTERM/SIGINT closes the object and the bus within 2 s, so `asibot up`, Docker and a
-user's Ctrl-C all stop it the same way.
+Every service folder has a `service.py` with three names (a `ServiceModule`): `NAME`,
+`add_arguments(parser)` and `build(bus, args) -> Service`, and a `__main__.py` of three lines:
+
+    from asibot import runtime
+    from asibot.<name> import service
+    raise SystemExit(runtime.run(service))
+
+The runtime parses the common flags, owns the instance name, connects (waiting for the
+router), builds the service, announces it, publishes Health every 2 s, and on SIGTERM/SIGINT
+closes the service and the bus within 2 s (a second Ctrl-C exits at once), so `asibot up`,
+Docker and a user's Ctrl-C all stop it the same way. `build` refuses bad arguments with a
+ValueError whose sentence the runtime prints.
 """
 
 from __future__ import annotations
@@ -16,7 +24,7 @@ import signal
 import sys
 import threading
 import time
-from typing import Any, Callable, Sequence
+from typing import Callable, Protocol, Sequence
 
 from asibot import keys, messages
 from asibot.bus import Bus
@@ -26,6 +34,32 @@ HEALTH_PERIOD = 2.0
 SHUTDOWN_BUDGET = 2.0
 
 log = logging.getLogger("asibot.runtime")
+
+
+class Service(Protocol):
+    """What `build` returns. Subclass it to inherit the defaults: no health details, and
+    `run` that waits for the stop signal (a service that owns the main thread overrides it)."""
+
+    def health(self) -> dict:
+        """A few numbers for `asibot status` and the Health message."""
+        return {}
+
+    def run(self, stop: threading.Event) -> None:
+        """Block until `stop` is set; the service's threads do the work meanwhile."""
+        stop.wait()
+
+    def close(self) -> None:
+        """Release hardware, threads and sockets; the bus is closed by the runtime after."""
+
+
+class ServiceModule(Protocol):
+    """A service's `service.py`."""
+
+    NAME: str
+
+    def add_arguments(self, parser: argparse.ArgumentParser) -> None: ...
+
+    def build(self, bus: Bus, args: argparse.Namespace) -> Service: ...
 
 
 class JsonFormatter(logging.Formatter):
@@ -58,9 +92,11 @@ def setup_logging(service: str, instance: str, level: str = "info", fmt: str = "
     root.setLevel(level.upper())
 
 
-def parser(service: str, add_arguments: Callable[[argparse.ArgumentParser], None] | None = None
-           ) -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog=f"python -m asibot.{service}", description=f"the {service} service")
+def parser(service: str, add_arguments: Callable[[argparse.ArgumentParser], None] | None = None,
+           package: str | None = None) -> argparse.ArgumentParser:
+    """The common flags, then the service's own; `package` is what `python -m` runs."""
+    p = argparse.ArgumentParser(prog=f"python -m {package or 'asibot.' + service}",
+                                description=f"the {service} service")
     p.add_argument("--robot", default=os.environ.get("ASIBOT_ROBOT"), help="robot id, e.g. asibot-sim")
     p.add_argument("--instance", default=None, help="instance name (default: the robot id, or 'main')")
     p.add_argument("--router", default=None, help="Zenoh router endpoint (default: $ASIBOT_ROUTER or tcp/127.0.0.1:7447)")
@@ -80,7 +116,7 @@ class _Shutdown:
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, self._on_signal)
 
-    def _on_signal(self, signum: int, frame: Any) -> None:
+    def _on_signal(self, signum: int, frame: object) -> None:
         if self.event.is_set():
             os._exit(130)  # second Ctrl-C: the user means it
         log.info("received %s, stopping", signal.Signals(signum).name)
@@ -91,36 +127,34 @@ class _Shutdown:
         t.start()
 
 
-def run(service: str, build: Callable[[Bus, argparse.Namespace], Any],
-        add_arguments: Callable[[argparse.ArgumentParser], None] | None = None,
-        argv: Sequence[str] | None = None) -> int:
+def run(service: ServiceModule, argv: Sequence[str] | None = None) -> int:
     """Run a service until signalled. Returns the process exit code."""
-    args = parser(service, add_arguments).parse_args(argv)
+    name = service.NAME
+    args = parser(name, service.add_arguments, getattr(service, "__package__", None)).parse_args(argv)
     args.instance = args.instance or args.robot or "main"
-    setup_logging(service, args.instance, args.log_level, args.log_format)
+    setup_logging(name, args.instance, args.log_level, args.log_format)
     shutdown = _Shutdown()
     args.stop = shutdown.event
     started = time.monotonic()
     try:
-        bus = Bus(service, args.router, stop=shutdown.event)
+        bus = Bus(name, args.router, stop=shutdown.event)
     except Unavailable:
         return 0 if shutdown.event.is_set() else 1
     try:
-        obj = build(bus, args)
+        obj = service.build(bus, args)
     except Exception as exc:
         log.error("could not start: %s", exc, exc_info=log.isEnabledFor(logging.DEBUG) or not str(exc))
         bus.close()
         return 1
-    bus.announce(keys.service(service, args.instance))
-    health = bus.publisher(keys.health(service, args.instance), messages.Health)
+    bus.announce(keys.service(name, args.instance))
+    health = bus.publisher(keys.health(name, args.instance), messages.Health)
 
     def publish_health() -> None:
         while not shutdown.event.wait(HEALTH_PERIOD):
             try:
-                details = obj.health() if hasattr(obj, "health") else {}
-                health.put(messages.Health(service=service, instance=args.instance,
+                health.put(messages.Health(service=name, instance=args.instance,
                                            uptime=time.monotonic() - started, pid=os.getpid(),
-                                           rejected=bus.rejected, details=details or {}))
+                                           rejected=bus.rejected, details=obj.health() or {}))
             except Exception:
                 log.exception("health report failed")
 
@@ -128,17 +162,13 @@ def run(service: str, build: Callable[[Bus, argparse.Namespace], Any],
     log.info("running (pid %d, router %s)", os.getpid(), bus.endpoint)
     code = 0
     try:
-        if hasattr(obj, "run"):
-            obj.run(shutdown.event)  # services that own the main thread (e.g. a viewer)
-        else:
-            shutdown.event.wait()
+        obj.run(shutdown.event)
     except Exception:
         log.exception("crashed")
         code = 1
     finally:
         try:
-            if hasattr(obj, "close"):
-                obj.close()
+            obj.close()
         except Exception:
             log.exception("close failed")
         bus.close()

@@ -1,14 +1,21 @@
-"""Test helpers: a real router on a free loopback port, and polling with a deadline."""
+"""Test helpers: a real router on a free loopback port, polling with a deadline, and an ideal
+arm driver to test controllers against (also used by bench/bench_control.py)."""
 
 from __future__ import annotations
 
 import contextlib
 import os
 import socket
+import threading
 import time
-from typing import Callable, Iterator
+from typing import Any, Callable, Iterator
 
-from asibot.bus import ROUTER_ENV, open_router
+import numpy as np
+
+from asibot import keys
+from asibot.bus import MEMORY_SCHEME, ROUTER_ENV, Bus, open_router
+from asibot.messages import ArmCommand, ArmState, GripperCommand, GripperState
+from asibot.timing import Ticker
 
 
 def free_port() -> int:
@@ -18,10 +25,8 @@ def free_port() -> int:
 
 
 @contextlib.contextmanager
-def router(port: int | None = None) -> Iterator[str]:
-    """Run a Zenoh router in this process and point ASIBOT_ROUTER at it (restored after)."""
-    endpoint = f"tcp/127.0.0.1:{port or free_port()}"
-    session = open_router(endpoint)
+def _every_bus_on(endpoint: str) -> Iterator[str]:
+    """Point ASIBOT_ROUTER, the default of every Bus(), at `endpoint` (restored after)."""
     previous = os.environ.get(ROUTER_ENV)
     os.environ[ROUTER_ENV] = endpoint
     try:
@@ -31,7 +36,25 @@ def router(port: int | None = None) -> Iterator[str]:
             os.environ.pop(ROUTER_ENV, None)
         else:
             os.environ[ROUTER_ENV] = previous
+
+
+@contextlib.contextmanager
+def router(port: int | None = None) -> Iterator[str]:
+    """Run a Zenoh router in this process and point ASIBOT_ROUTER at it (restored after)."""
+    endpoint = f"tcp/127.0.0.1:{port or free_port()}"
+    session = open_router(endpoint)
+    try:
+        with _every_bus_on(endpoint):
+            yield endpoint
+    finally:
         session.close()
+
+
+@contextlib.contextmanager
+def memory_bus(name: str) -> Iterator[str]:
+    """Point every Bus() opened in this process at the in-memory bus `mem://NAME` (no router)."""
+    with _every_bus_on(MEMORY_SCHEME + name) as endpoint:
+        yield endpoint
 
 
 def wait_until(predicate: Callable[[], object], timeout: float = 5.0, interval: float = 0.01,
@@ -45,3 +68,68 @@ def wait_until(predicate: Callable[[], object], timeout: float = 5.0, interval: 
         if time.monotonic() > deadline:
             raise AssertionError(message or f"condition not met within {timeout} s")
         time.sleep(interval)
+
+
+class IdealDriver:
+    """An ideal arm driver: an integrator that keeps the driver contract (arm/state and
+    gripper/state at 100 Hz, obeys arm/command in position mode within the joint limits and max
+    velocities, announces driver_alive) for the robot `robot` of catalog entry `spec`
+    (asibot.robots.RobotSpec). Starts at spec.home; `set_joints(q)` teleports it (rad).
+    The fingers move at 0.1 m/s and stop on an object of width `object_width` (m) if set."""
+
+    def __init__(self, robot: str, spec: Any) -> None:
+        self.spec = spec
+        self.q = np.asarray(spec.home, float).copy()
+        self.target = self.q.copy()
+        self.vmax = np.asarray(spec.max_velocity, float)
+        self.commands: list[ArmCommand] = []
+        self.gripper = 0.0
+        self.gripper_target = 0.0
+        #: Width of an object between the fingers (m), or None: closing stops on it.
+        self.object_width: float | None = None
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self.bus = Bus("ideal-driver")
+        self.pub = self.bus.publisher(keys.arm_state(robot), ArmState)
+        self.grip_pub = self.bus.publisher(keys.gripper_state(robot), GripperState)
+        self.bus.subscribe(keys.arm_command(robot), ArmCommand, self._on_command)
+        self.bus.subscribe(keys.gripper_command(robot), GripperCommand, self._on_grip)
+        self.token = self.bus.announce(keys.driver_alive(robot))
+        self.thread = threading.Thread(target=self._run, name="ideal-driver", daemon=True)
+        self.thread.start()
+
+    def _on_command(self, cmd: ArmCommand) -> None:
+        if cmd.mode == "position" and len(cmd.values) == len(self.q):
+            with self._lock:
+                self.commands.append(cmd)
+                self.target = np.clip(cmd.values, self.spec.lower, self.spec.upper)
+
+    def _on_grip(self, cmd: GripperCommand) -> None:
+        self.gripper_target = cmd.opening
+
+    def set_joints(self, q) -> None:
+        """Put the arm at q (rad) at once, holding there."""
+        with self._lock:
+            self.q = np.asarray(q, float).copy()
+            self.target = self.q.copy()
+
+    def _run(self) -> None:
+        ticker = Ticker(100.0, stop=self._stop)
+        dt = ticker.period
+        for _ in ticker:
+            with self._lock:
+                step = np.clip(self.target - self.q, -self.vmax * dt, self.vmax * dt)
+                self.q = self.q + step
+                q, v = self.q.tolist(), (step / dt).tolist()
+                floor = self.object_width if self.object_width is not None else 0.0
+                target = max(self.gripper_target, floor)
+                self.gripper += float(np.clip(target - self.gripper, -0.1 * dt, 0.1 * dt))
+                holding = self.object_width is not None and abs(self.gripper - floor) < 1e-6 \
+                    and self.gripper_target < floor
+            self.pub.put(ArmState(names=list(self.spec.joint_names), positions=q, velocities=v, mode="position"))
+            self.grip_pub.put(GripperState(opening=self.gripper, holding=holding))
+
+    def close(self) -> None:
+        self._stop.set()
+        self.thread.join(timeout=1.0)
+        self.bus.close()

@@ -1,4 +1,5 @@
-"""The ASIBOT arm on CANopen: a CiA 402 master over python-can, and a 5-drive emulator.
+"""The ASIBOT arm on CANopen: a CiA 402 master over python-can, and a 5-drive emulator
+(the `emulator` package).
 
-Robot id `asibot`, service name `arm_driver`. Facts: /work/shared/reference/asibot.md section 4.
+Robot id `asibot`, service name `arm_driver`. Facts and their sources: docs/canopen.md.
 """

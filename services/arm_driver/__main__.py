@@ -1,7 +1,7 @@
 """`python -m asibot.arm_driver --robot asibot --can socketcan:can0` (or `--can emulated`)."""
 
 from asibot import runtime
-from asibot.arm_driver.service import SERVICE, add_arguments, build
+from asibot.arm_driver import service
 
 if __name__ == "__main__":
-    raise SystemExit(runtime.run(SERVICE, build, add_arguments=add_arguments))
+    raise SystemExit(runtime.run(service))

@@ -1,9 +1,9 @@
 """Open a CAN bus by name, the way python-can names interfaces: `socketcan:can0`,
 `pcan:PCAN_USBBUS1`, `kvaser:0`, `virtual:asibot`, `slcan:/dev/ttyACM0@115200`...
 
-`emulated` is this driver's own: it starts the five-drive emulator in this process on a private
-virtual channel (see emulator.py), so `asibot up --profile emulated` needs no hardware, no kernel
-module and no multicast.
+`emulated` is this driver's own: it starts the five-drive emulator (the `emulator` package) in
+this process on a private virtual channel, so `asibot up --profile emulated` needs no
+hardware, no kernel module and no multicast.
 """
 
 from __future__ import annotations

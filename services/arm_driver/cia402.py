@@ -1,5 +1,5 @@
 """The CiA 402 drive state machine: statusword -> state, and the controlword that moves a
-drive one step towards "operation enabled" (reference/asibot.md 4.3, CiA 402 section 6)."""
+drive one step towards "operation enabled" (docs/canopen.md, "CiA 402 states")."""
 
 from __future__ import annotations
 

@@ -3,8 +3,8 @@
 The iPOS drives count incrementally from wherever they were powered on, so after a power
 cycle q2..q4 would be believed at 0 deg wherever they really are. The seed read each joint's
 absolute encoder at start-up and wrote it into the drive's position counter (0x2081, "Set
-actual position"; reference asibot.md 4.1 and 4.3 step 6). q1 and q5 have no absolute
-encoder: the arm must be powered on with them at their zero.
+actual position"; docs/canopen.md, "Absolute encoders" and "Start-up"). q1 and q5 have no
+absolute encoder: the arm must be powered on with them at their zero.
 
 The PIC's protocol, as yarp-devices' CuiAbsolute speaks it (pull mode, as the ASIBOT uses):
   request  id          1 byte  0x03            poll once

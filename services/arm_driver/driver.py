@@ -190,7 +190,8 @@ class ArmDriver:
 
     def _bring_up(self, nodes: list[int]) -> None:
         # No NMT reset first: it would restart a drive's position counter, and q1/q5 have no
-        # absolute encoder to recover it from (reference 4.1). Configuring is idempotent.
+        # absolute encoder to recover it from (docs/canopen.md, "Absolute encoders"). Configuring
+        # is idempotent.
         for node in nodes:
             self.master.configure(node)
             self.master.start(node)

@@ -1,8 +1,8 @@
 """EMCY frames -> one sentence a person can act on.
 
 Codes: Technosoft iPOS (TechnosoftIposEmcy.cpp) and generic CiA 301 ones (EmcyConsumer.cpp),
-as listed in /work/shared/reference/asibot.md 4.3. Frame layout: u16 code, u8 error
-register, 5 manufacturer bytes.
+as listed in docs/canopen.md, "EMCY codes". Frame layout: u16 code, u8 error register,
+5 manufacturer bytes.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 canopen does the SDO client, NMT commands, heartbeat reception and EMCY decoding; this module
 adds what canopen lacks for a drive master: the PDO configuration sequence without an EDS, the
 CiA 402 enable handshake, per-cycle RPDO + SYNC, and bus-off detection from error frames and
-failed writes. Start-up follows TechnosoftIpos' initialize() (reference/asibot.md 4.3): ping,
+failed writes. Start-up follows TechnosoftIpos' initialize() (docs/canopen.md, "Start-up"): ping,
 absolute encoder sync (a joint with an absolute encoder gets its position counter set from
 it), software limits, profile velocity/acceleration, TPDO/RPDO mapping, heartbeat producer,
 NMT start, then shutdown -> switch on -> enable operation.

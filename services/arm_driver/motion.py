@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import math
 
-WATCHDOG_S = 0.2            # driver contract: velocity commands older than 200 ms stop the arm
+from asibot.messages import COMMAND_WATCHDOG_S
+
 FEED_FORWARD_HORIZON_S = 0.1
 
 
@@ -68,7 +69,7 @@ class JointReference:
 
     def watchdog_expired(self, now: float) -> bool:
         """True once a velocity command is older than 200 ms while it still moves the arm."""
-        return self.mode == "velocity" and any(self._velocity) and now - self._since > WATCHDOG_S
+        return self.mode == "velocity" and any(self._velocity) and now - self._since > COMMAND_WATCHDOG_S
 
     def step(self, now: float) -> list[float]:
         """Advance one period; returns the new set-points (rad)."""

@@ -2,7 +2,7 @@
 
 One table shared by the master (to encode SDO values and decode PDOs) and the emulator (its
 object dictionary), so both sides agree on every object's size and sign by construction.
-Indices and meanings: /work/shared/reference/asibot.md 4.3.
+Indices and meanings: docs/canopen.md, "Objects".
 """
 
 from __future__ import annotations

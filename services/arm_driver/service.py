@@ -12,25 +12,26 @@ import logging
 import os
 import time
 
-from asibot import keys, messages
+from asibot import keys
 from asibot.arm_driver import canbus, config
 from asibot.arm_driver import emulator as emulation
 from asibot.arm_driver.driver import ArmDriver, FaultError
 from asibot.arm_driver.master import CanopenMaster
 from asibot.bus import Bus
-from asibot.errors import MessageError, RpcError
+from asibot.errors import RpcError
 from asibot.messages import ArmCommand, ArmState, EStop, Event
+from asibot.runtime import Service
 
 log = logging.getLogger(__name__)
 
-SERVICE = "arm_driver"
+NAME = "arm_driver"
 DEFAULT_ROBOT = "asibot"
 CAN_ENV = "ASIBOT_ARM_CAN"
 FAULTS = ("over_current", "heartbeat_loss", "silent", "bus_off", "reboot", "power_cycle",
           "encoder_silent", "encoder_error", "clear")
 
 
-class ArmDriverService:
+class ArmDriverService(Service):
     """The driver contract for one CANopen arm."""
 
     def __init__(self, bus: Bus, robot: str, can_name: str, config_path: str | None = None) -> None:
@@ -55,7 +56,8 @@ class ArmDriverService:
         self.driver = ArmDriver(CanopenMaster(can_bus, self.config), self.config,
                                 on_state=self._state.put, on_event=self._event)
         bus.subscribe(keys.estop(robot), EStop, self._on_estop, latest=True)
-        bus.subscribe_raw(keys.arm_command(robot), self._on_command)
+        bus.subscribe(keys.arm_command(robot), ArmCommand, self._on_command, with_key=True,
+                      on_reject=self._refuse_command)
         bus.watch(keys.controller_alive(robot), self._on_controller)
         bus.serve(keys.driver_rpc(robot, "status"), self._status)
         bus.serve(keys.driver_rpc(robot, "reset_fault"), self._reset_fault)
@@ -65,16 +67,17 @@ class ArmDriverService:
         self.driver.start()
 
     # ------------------------------------------------------------ in
-    def _on_command(self, key: str, payload: bytes, receive_ns: int) -> None:
-        # Decoded here rather than by bus.subscribe so that a malformed command (NaN, wrong
-        # mode) is answered with an Event, as the driver contract asks, not only counted.
+    def _on_command(self, key: str, cmd: ArmCommand) -> None:
         try:
-            cmd = messages.decode(ArmCommand, payload)
             self.driver.command(cmd.mode, cmd.values, cmd.velocities)
-        except (MessageError, ValueError) as exc:
+        except ValueError as exc:  # beyond the limits, wrong length: the driver's sentence
             self.bus.reject(key, exc)
-            self._event("error", "bad_command", f"Arm command rejected, the arm keeps its previous motion: {exc}",
-                        throttle=1.0)
+            self._refuse_command(key, exc)
+
+    def _refuse_command(self, key: str, exc: Exception) -> None:
+        # Answered with an Event, as the driver contract asks, not only counted.
+        self._event("error", "bad_command", f"Arm command rejected, the arm keeps its previous motion: {exc}",
+                    throttle=1.0)
 
     def _on_estop(self, msg: EStop) -> None:
         self.driver.set_estop(msg.engaged, msg.reason)

@@ -2,7 +2,7 @@
 
 counts = deg x gear ratio x encoder pulses / 360, so the ASIBOT's gear 160 and 4096 pulses give
 655 360 counts per joint turn (1820.44 counts/deg). Velocity and acceleration go to the drive in
-counts per sampling period (1 ms) as 16.16 fixed point. Source: reference/asibot.md 4.2.
+counts per sampling period (1 ms) as 16.16 fixed point. Source: docs/canopen.md, "Units".
 """
 
 from __future__ import annotations

@@ -1,10 +1,11 @@
 """The ARCOS client: sync handshake, motion commands with state reflection, keepalive.
 
 A plain class over a `Link`; it knows bytes and firmware units, not Zenoh. The sequence is
-ros.md 1.3: SYNC0, SYNC1, SYNC2 each sent after its echo, CLOSE and restart if a SIP shows
-the robot still open from an earlier session, then OPEN, PULSE, ENABLE 1, SONAR 1, and an
-explicit VEL 0 / RVEL 0 so a reconnect never resumes an old setpoint (ARCOS resumes the
-last setpoints when commands come back after its watchdog, ros.md 1.6).
+that of docs/arcos.md "Connection": SYNC0, SYNC1, SYNC2 each sent after its echo, CLOSE and
+restart if a SIP shows the robot still open from an earlier session, then OPEN, PULSE,
+ENABLE 1, SONAR 1, and an explicit VEL 0 / RVEL 0 so a reconnect never resumes an old
+setpoint (ARCOS resumes the last setpoints when commands come back after its watchdog,
+docs/arcos.md "Motion and watchdog").
 """
 
 from __future__ import annotations
@@ -24,12 +25,13 @@ from asibot.base_driver.sip import is_sip, parse_sync2
 
 log = logging.getLogger(__name__)
 
-#: ARIA waits up to 1000 ms for each sync reply (ros.md 1.3).
+#: ARIA waits up to 1000 ms for each sync reply (docs/arcos.md "Connection").
 SYNC_REPLY_TIMEOUT = 1.0
 SYNC_ATTEMPTS = 5
-#: ARIA's myStateReflectionRefreshTime: resend motion, else PULSE, every 500 ms (ros.md 1.6).
+#: ARIA's myStateReflectionRefreshTime: resend motion, else PULSE, every 500 ms
+#: (docs/arcos.md "Motion and watchdog").
 REFLECTION_REFRESH = 0.5
-#: p2os pauses one cycle after CLOSE before syncing again (ros.md 1.3).
+#: p2os pauses one cycle after CLOSE before syncing again (docs/arcos.md "Connection").
 CLOSE_PAUSE = 0.2
 
 
@@ -149,7 +151,7 @@ class ArcosClient:
         self.set_velocity(0, 0)
 
     def close(self) -> None:
-        """Stop, then CLOSE, as p2os shuts down (ros.md 1.3); never raises."""
+        """Stop, then CLOSE, as p2os shuts down (docs/arcos.md "Connection"); never raises."""
         try:
             self.send(codec.command(Cmd.STOP))
             self.send(codec.command(Cmd.CLOSE))
@@ -187,7 +189,7 @@ class ArcosClient:
             self.send(codec.command(Cmd.PULSE))
 
     def emergency_stop(self) -> None:
-        """E_STOP overrides the deceleration limits (ros.md 1.4); the setpoint becomes zero."""
+        """E_STOP overrides the deceleration limits (docs/arcos.md "Commands"); the setpoint becomes zero."""
         self.send(codec.command(Cmd.E_STOP))
         self._sent = None
         self.set_velocity(0, 0)  # and a zero setpoint, so nothing resumes after it
@@ -201,5 +203,5 @@ class _StillOpen(Exception):
 
 
 def to_firmware(vx: float, wz: float) -> tuple[int, int]:
-    """cmd_vel in SI to (VEL mm/s, RVEL deg/s), rounded as p2os does (ros.md 1.6)."""
+    """cmd_vel in SI to (VEL mm/s, RVEL deg/s), rounded as p2os does (docs/arcos.md "Motion and watchdog")."""
     return int(round(vx * 1000.0)), int(round(math.degrees(wz)))

@@ -1,10 +1,10 @@
 """ARCOS packet framing: pure functions from values to bytes and back.
 
-Everything here follows /work/shared/reference/ros.md section 1 (ARIA `ArRobotPacket`,
+Everything here follows docs/arcos.md, "Framing" to "Commands" (ARIA `ArRobotPacket`,
 `ArRobotPacketSender`, p2os `packet.cpp`). Nothing does I/O, so every byte is testable.
 
 A packet is `FA FB | COUNT | payload | CHK_hi CHK_lo` with COUNT = len(payload) + 2;
-integers in the payload are little-endian, the checksum is big-endian (ros.md 1.1).
+integers in the payload are little-endian, the checksum is big-endian (docs/arcos.md "Framing").
 """
 
 from __future__ import annotations
@@ -13,10 +13,10 @@ from typing import Iterator
 
 HEADER = b"\xfa\xfb"
 
-#: ARCOS ignores a command whose COUNT is over 204 (ros.md 1.1); P2OS stops at 200.
+#: ARCOS ignores a command whose COUNT is over 204 (docs/arcos.md "Framing"); P2OS stops at 200.
 MAX_COUNT = 204
 
-#: Argument type bytes (ros.md 1.2, ARIA ArRobotPacketSender.h).
+#: Argument type bytes (docs/arcos.md "Arguments", ARIA ArRobotPacketSender.h).
 ARGINT = 0x3B
 ARGNINT = 0x1B
 ARGSTR = 0x2B
@@ -26,7 +26,7 @@ ARG_MAX = 0xFFFF
 
 
 class Cmd:
-    """Client command numbers (ros.md 1.4, ARIA ArCommands.h)."""
+    """Client command numbers (docs/arcos.md "Commands", ARIA ArCommands.h)."""
 
     PULSE = 0
     SYNC0 = 0
@@ -55,7 +55,7 @@ class Cmd:
     E_STOP = 55
 
 
-#: Robot-to-client packet types (ros.md 1.5): standard SIPs, 0x32 stopped, 0x33 moving.
+#: Robot-to-client packet types (docs/arcos.md "SIP"): standard SIPs, 0x32 stopped, 0x33 moving.
 SIP_TYPES = frozenset({0x30, 0x31, 0x32, 0x33, 0x34})
 SIP_STOPPED = 0x32
 SIP_MOVING = 0x33
@@ -66,7 +66,8 @@ class PacketError(ValueError):
 
 
 def checksum(payload: bytes) -> int:
-    """ARIA `calcCheckSum`: big-endian 16-bit word sum; an odd last byte is XORed in (ros.md 1.1)."""
+    """ARIA `calcCheckSum`: big-endian 16-bit word sum; an odd last byte is XORed in
+    (docs/arcos.md "Framing")."""
     c = 0
     n = len(payload)
     i = 0
@@ -97,7 +98,8 @@ def command(cmd: int) -> bytes:
 
 
 def command_int(cmd: int, value: int) -> bytes:
-    """A command with a signed integer argument: 0x3B |v| or 0x1B |v| (ARIA comInt, ros.md 1.2)."""
+    """A command with a signed integer argument: 0x3B |v| or 0x1B |v| (ARIA comInt,
+    docs/arcos.md "Arguments")."""
     _check_cmd(cmd)
     if isinstance(value, bool) or not isinstance(value, int):
         raise PacketError(f"command {cmd} needs an integer argument, got {value!r}")
@@ -117,7 +119,8 @@ def command_str(cmd: int, text: bytes) -> bytes:
 
 
 def command_2bytes(cmd: int, high: int, low: int) -> bytes:
-    """ARIA com2Bytes: the int16 (high<<8 | low), sent as a signed int argument (ros.md 1.2)."""
+    """ARIA com2Bytes: the int16 (high<<8 | low), sent as a signed int argument
+    (docs/arcos.md "Arguments")."""
     word = ((high & 0xFF) << 8) | (low & 0xFF)
     if word >= 0x8000:
         word -= 0x10000
@@ -125,7 +128,8 @@ def command_2bytes(cmd: int, high: int, low: int) -> bytes:
 
 
 def vel2(left_mm_s: int, right_mm_s: int, divisor: int = 20) -> bytes:
-    """VEL2: each wheel / Vel2Divisor clamped to a signed byte; high byte = left (ros.md 1.6)."""
+    """VEL2: each wheel / Vel2Divisor clamped to a signed byte; high byte = left
+    (docs/arcos.md "Motion and watchdog")."""
     def wheel(v: int) -> int:
         return max(-128, min(127, int(round(v / divisor)))) & 0xFF
     return command_2bytes(Cmd.VEL2, wheel(left_mm_s), wheel(right_mm_s))
@@ -155,7 +159,7 @@ def payload_of(packet: bytes) -> bytes:
 
 
 class Deframer:
-    """Turns a byte stream into verified payloads, skipping garbage (p2os `Receive`, ros.md 1.1).
+    """Turns a byte stream into verified payloads, skipping garbage (p2os `Receive`, docs/arcos.md "Framing").
 
     Feed it whatever the line delivered; it keeps partial packets between calls. On a bad
     checksum it drops only the first header byte and searches again, so a packet hidden

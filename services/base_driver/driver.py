@@ -22,15 +22,16 @@ from asibot.base_driver.notices import EventSink, Notices
 from asibot.base_driver.params import RobotParams
 from asibot.base_driver.sip import is_sip, parse_sip
 from asibot.base_driver.state import BaseState, StateTracker
+from asibot.errors import RpcError
+from asibot.messages import COMMAND_WATCHDOG_S
 
 log = logging.getLogger(__name__)
 
-#: The driver contract: no cmd_vel for 200 ms -> stop.
-WATCHDOG = 0.2
-#: ARCOS sends a SIP every 100 ms (ros.md 1.5); five missing ones mean the line is dead.
+#: ARCOS sends a SIP every 100 ms (docs/arcos.md "SIP"); five missing ones mean the line is dead.
 SIP_TIMEOUT = 0.5
 RECONNECT_PERIOD = 1.0
-#: p2os defaults MOTOR_DEF_MAX_SPEED 0.5 m/s and MOTOR_DEF_MAX_TURNSPEED 100 deg/s (ros.md 1.6).
+#: p2os defaults MOTOR_DEF_MAX_SPEED 0.5 m/s and MOTOR_DEF_MAX_TURNSPEED 100 deg/s
+#: (docs/arcos.md "Motion and watchdog").
 DEFAULT_MAX_VX = 0.5
 DEFAULT_MAX_WZ = math.radians(100)
 StateSink = Callable[[BaseState], None]
@@ -42,7 +43,7 @@ class BaseDriver:
     def __init__(self, port: str, *, on_state: StateSink, on_event: EventSink,
                  baud: int = 9600, params: RobotParams | None = None,
                  max_vx: float = DEFAULT_MAX_VX, max_wz: float = DEFAULT_MAX_WZ,
-                 watchdog: float = WATCHDOG,
+                 watchdog: float = COMMAND_WATCHDOG_S,
                  link_factory: Callable[[str, int], Link] = open_link,
                  on_write: Callable[[bytes], None] | None = None) -> None:
         if not (max_vx > 0 and max_wz > 0 and math.isfinite(max_vx) and math.isfinite(max_wz)):
@@ -147,9 +148,9 @@ class BaseDriver:
         with self._lock:
             client = self._client
             if client is None:
-                raise ConnectionError(f"the Pioneer on {self.port} is not connected; check the cable")
+                raise RpcError("unavailable", f"The Pioneer on {self.port} is not connected; check the cable.")
             if self._estop:
-                raise PermissionError("the emergency stop is engaged; release it before resetting faults")
+                raise RpcError("estop", "The emergency stop is engaged; release it before resetting faults.")
             self._guarded(lambda: client.enable_motors(True))
         return {"motors_enabled_requested": True}
 

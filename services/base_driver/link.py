@@ -1,7 +1,7 @@
 """The serial line, named by a URL as pyserial's `serial_for_url` understands it.
 
 `/dev/ttyUSB0` (a real port, 8N1 raw), `socket://127.0.0.1:8101` (MobileSim, ser2net, the
-emulator), `loop://` and the other pyserial handlers all work unchanged (ros.md 1.7).
+emulator), `loop://` and the other pyserial handlers all work unchanged (docs/arcos.md "Serial line").
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import socket
 
 import serial
 
-#: ARCOS's power-on rate (ros.md 1.7: ARIA and p2os both start at 9600).
+#: ARCOS's power-on rate (docs/arcos.md "Serial line": ARIA and p2os both start at 9600).
 DEFAULT_BAUD = 9600
 
 LinkError = (serial.SerialException, OSError)

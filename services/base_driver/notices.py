@@ -1,8 +1,9 @@
 """User-facing notices from the stream of base states: edges of stall, bumper, estop-button,
 motor and battery flags become one Event each, not one per SIP.
 
-Battery thresholds are p2os's diagnostics (ros.md 1.8: WARN below 11.75 V, ERROR below
-11.0 V), with a 0.2 V hysteresis so a sagging battery under load does not chatter.
+Battery thresholds are p2os's diagnostics (docs/arcos.md "P3-AT parameters": WARN below
+11.75 V, ERROR below 11.0 V), with a 0.2 V hysteresis so a sagging battery under load does
+not chatter.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """P3-AT parameter sets, chosen by the subclass the controller names in its SYNC2 reply.
 
-Values from /work/shared/reference/ros.md section 1.8 (ARIA `params/p3at.p`, `p3at-sh.p`,
+Values from docs/arcos.md, "P3-AT parameters" (ARIA `params/p3at.p`, `p3at-sh.p`,
 p2os `robot_params.cpp`): "p3at" is the old H8/AROS controller whose positions count in
 0.465 mm units, "p3at-sh" the SH/ARCOS controller already counting in mm.
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
-#: Sonar poses (x mm, y mm, heading deg) of the 8+8 ring, ARIA p3at-sh.p (ros.md 1.8).
+#: Sonar poses (x mm, y mm, heading deg) of the 8+8 ring, ARIA p3at-sh.p (docs/arcos.md "P3-AT parameters").
 SONAR_POSES: tuple[tuple[int, int, int], ...] = (
     (147, 136, 90), (193, 119, 50), (227, 79, 30), (245, 27, 10),
     (245, -27, -10), (227, -79, -30), (193, -119, -50), (147, -136, -90),
@@ -18,10 +18,10 @@ SONAR_POSES: tuple[tuple[int, int, int], ...] = (
     (-241, 27, 170), (-223, 79, 150), (-189, 119, 130), (-144, 136, 90),
 )
 
-#: Sonar board default maximum range (ros.md 1.8).
+#: Sonar board default maximum range (docs/arcos.md "P3-AT parameters").
 SONAR_MAX_RANGE_MM = 4335
 
-#: p2os battery diagnostics (ros.md 1.8): WARN below 11.75 V, ERROR below 11.0 V.
+#: p2os battery diagnostics (docs/arcos.md "P3-AT parameters"): WARN below 11.75 V, ERROR below 11.0 V.
 BATTERY_WARN_V = 11.75
 BATTERY_ERROR_V = 11.0
 
@@ -43,7 +43,7 @@ class RobotParams:
 
     @property
     def track_mm(self) -> float:
-        """Effective (slip-inflated) track implied by DiffConvFactor (ros.md 1.5)."""
+        """Effective (slip-inflated) track implied by DiffConvFactor (docs/arcos.md "SIP")."""
         return 2.0 / self.diff_conv
 
     def sonar_angles(self) -> list[float]:

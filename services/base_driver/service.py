@@ -9,8 +9,8 @@ import os
 
 from asibot import keys
 from asibot.bus import Bus
-from asibot.errors import RpcError
 from asibot.messages import Battery, Bumpers, EStop, Event, Odometry, Sonar, Twist
+from asibot.runtime import Service
 
 from asibot.base_driver.driver import DEFAULT_MAX_VX, DEFAULT_MAX_WZ, BaseDriver
 from asibot.base_driver.params import KNOWN
@@ -18,11 +18,11 @@ from asibot.base_driver.state import BaseState
 
 log = logging.getLogger(__name__)
 
-SERVICE = "base_driver"
+NAME = "base_driver"
 DEFAULT_ROBOT = "pioneer"
 
 
-class BaseDriverService:
+class BaseDriverService(Service):
     """Publishes the base side of the driver contract for one robot id."""
 
     def __init__(self, bus: Bus, robot: str, port: str, *, baud: int = 9600, params: str | None = None,
@@ -52,16 +52,10 @@ class BaseDriverService:
         self.driver.set_estop(msg.engaged, msg.reason)
 
     def _status(self, request: dict) -> dict:
-        return {"ok": True, "robot": self.robot, **self.driver.status()}
+        return {"robot": self.robot, **self.driver.status()}
 
     def _reset_fault(self, request: dict) -> dict:
-        try:
-            result = self.driver.reset_fault()
-        except ConnectionError as exc:
-            raise RpcError("unavailable", str(exc)) from None
-        except PermissionError as exc:
-            raise RpcError("estop", str(exc)) from None
-        return {"ok": True, **result}
+        return self.driver.reset_fault()  # refusals are RpcErrors with the driver's sentence
 
     # ------------------------------------------------------------ out
     def _publish_state(self, s: BaseState) -> None:

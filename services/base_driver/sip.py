@@ -1,6 +1,6 @@
 """The standard Server Information Packet (SIP), in raw ARCOS units, both directions.
 
-Layout from /work/shared/reference/ros.md section 1.5 (ARIA `processMotorPacket`, p2os
+Layout from docs/arcos.md, "SIP" (ARIA `processMotorPacket`, p2os
 `ParseStandard`). Values stay in firmware units here; `params.RobotParams` converts them,
 because the conversion depends on which controller (p3at or p3at-sh) answered the sync.
 Optional tail fields are read only if bytes remain, as ARIA does.
@@ -18,11 +18,11 @@ _SONAR = struct.Struct("<BH")
 #: GRIP_STATE ANPORT ANALOG DIGIN DIGOUT BATTERYX10 CHARGESTATE ROTVEL
 _TAIL = struct.Struct("<BBBBBHBh")
 
-#: FLAGS bits (ros.md 1.5).
+#: FLAGS bits (docs/arcos.md "SIP").
 FLAG_MOTORS_ENABLED = 1 << 0
 FLAG_ESTOP = 1 << 5
 
-#: STALL_BUMPERS bits (ros.md 1.5): bit 0 left stall, 1-7 bumpers, 8 right stall, 9-15 rear set.
+#: STALL_BUMPERS bits (docs/arcos.md "SIP"): bit 0 left stall, 1-7 bumpers, 8 right stall, 9-15 rear set.
 STALL_LEFT = 1 << 0
 STALL_RIGHT = 1 << 8
 BUMPER_BITS = 7
@@ -122,7 +122,8 @@ def _i16(v: int) -> int:
 
 
 def parse_sync2(payload: bytes) -> tuple[str, str, str]:
-    """The SYNC2 reply: command byte 2, then NUL-terminated name, class, subclass (ros.md 1.3)."""
+    """The SYNC2 reply: command byte 2, then NUL-terminated name, class, subclass
+    (docs/arcos.md "Connection")."""
     if not payload or payload[0] != 2:
         raise PacketError("not a SYNC2 reply")
     parts = payload[1:].split(b"\x00")

@@ -1,6 +1,6 @@
 """From raw SIPs to the base's state in SI units: odometry with 15-bit unwrap, sonar, bumpers.
 
-ARCOS reports XPOS/YPOS as 15-bit counters that wrap (ros.md 1.5). Like ARIA, the tracker
+ARCOS reports XPOS/YPOS as 15-bit counters that wrap (docs/arcos.md "SIP"). Like ARIA, the tracker
 integrates the wrapped difference between consecutive SIPs instead of trusting the absolute
 value (p2os's `&0xEFFF % 4096` masking is the documented bug we avoid).
 """

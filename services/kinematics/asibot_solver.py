@@ -1,9 +1,10 @@
-"""The ASIBOT closed-form solver, with the published conventions (asibot.md 1.3-1.7).
+"""The ASIBOT closed-form solver, with the published conventions (docs/asibot-conventions.md,
+"Kinematics": dimensions, limits, points, fwdKin, invKin, Jacobian).
 
 Points are [x, y, z, rot(y'), rot(z'')] in metres and degrees: a ZYZ Euler triple whose
 first angle is the azimuth atan2(y, x) of the position. Joints are in degrees.
 
-Orientation fix (asibot.md 1.4 caveat): the published fwdKin returns rot(y') = q2+q3+q4,
+Orientation fix (the published fwdKin caveat): the published fwdKin returns rot(y') = q2+q3+q4,
 rot(z'') = q5, which is wrong when the tip leans behind the q1 azimuth (rP < 0), because
 the azimuth of the position is then q1 + 180. We return (-oyP, ozPP + 180) in that case,
 so the 5-tuple always means Rz(atan2(y, x)) Ry(rot(y')) Rz(rot(z'')). With this, the FORWARD
@@ -13,10 +14,13 @@ When rP == 0 (tip on the q1 axis) the azimuth is undefined: fwd then reports the
 
 IK follows AsibotSolver::invKin: reach checks, four configurations (FORWARD/REVERSED x
 elbow UP/DOWN), angles folded into (-180, 180] (without the published snap of |q| < 0.001
-deg to 0, which costs up to 0.001 deg of accuracy for no gain) but also tried +-360 for q1 and q5 (their
-limits are +-360, asibot.md 1.2, issue #111), limits with 0.001 deg tolerance, and the
-leastOverallAngularDisplacement selection with its tie rules (smaller |dq2| between the two
-best if same FORWARD/REVERSED; elbow UP on a tie; equal sums keep the first in FU, FD, RU, RD).
+deg to 0, which costs up to 0.001 deg of accuracy for no gain) but also tried +-360 for q1
+and q5 (their limits are +-360, roboticslab-uc3m/kinematics-dynamics issue #111), limits
+with 0.001 deg tolerance, and the leastOverallAngularDisplacement selection with its tie rules: of the two configurations with
+the smallest sums of |q - q_guess| (equal sums ranked FU, FD, RU, RD), the one with the smaller
+|dq2| if both are FORWARD or both REVERSED, elbow UP if that ties too. Two configurations exactly
+as far from the guess are thus decided by |dq2|, which is what the seed's own tests expect
+(elbow DOWN in testAsibotSolverFromFile.cpp InvKin3 and InvKin4).
 """
 
 from __future__ import annotations
@@ -30,8 +34,8 @@ from asibot.poses import point_rotation
 
 from .errors import JointLimit, Unreachable
 
-A = (0.3, 0.4, 0.4, 0.3)  # A0..A3 [m], asibot.md 1.1
-LIMITS_DEG = ((-360.0, 360.0), (-135.0, 135.0), (-135.0, 135.0), (-135.0, 135.0), (-360.0, 360.0))  # asibot.md 1.2
+A = (0.3, 0.4, 0.4, 0.3)  # A0..A3 [m], docs/asibot-conventions.md "Kinematics"
+LIMITS_DEG = ((-360.0, 360.0), (-135.0, 135.0), (-135.0, 135.0), (-135.0, 135.0), (-360.0, 360.0))  # deg, same section
 TOL = 1e-3  # deg, AsibotConfiguration limit tolerance
 _R = math.pi / 180.0
 _D = 180.0 / math.pi
@@ -55,8 +59,9 @@ def _fmt(x: Sequence[float]) -> str:
 
 
 def tool_frame(x: Sequence[float] | None) -> np.ndarray | None:
-    """The 4x4 tool (TCP) frame of [x, y, z, rx, ry, rz] (m, axis-angle rad) on the flange,
-    or None for no tool (None or all zeros), as the seed's BasicCartesianControl::tool takes it."""
+    """The 4x4 transform of a tool (TCP) frame [x, y, z, rx, ry, rz]: offset in m and rotation
+    vector (axis times angle) in rad, relative to the frame it is attached to; None when x is
+    None or all zeros (no tool). Raises ValueError for anything but 6 finite numbers."""
     if x is None:
         return None
     if len(x) != 6 or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
@@ -75,16 +80,17 @@ def tool_frame(x: Sequence[float] | None) -> np.ndarray | None:
     return h
 
 
-def _h(x: Sequence[float]) -> np.ndarray:
-    """4x4 transform of a 5-point (degrees)."""
+def point_transform(x: Sequence[float]) -> np.ndarray:
+    """4x4 transform of a point [x, y, z, rot(y'), rot(z'')] (m, deg)."""
     h = np.eye(4)
     h[:3, :3] = point_rotation(x[0], x[1], x[3] * _R, x[4] * _R)
     h[:3, 3] = x[:3]
     return h
 
 
-def _point(h: np.ndarray, azimuth_deg: float | None = None) -> list[float]:
-    """5-point of a transform whose orientation is Rz(azimuth) Ry(b) Rz(g)."""
+def transform_point(h: np.ndarray, azimuth_deg: float | None = None) -> list[float]:
+    """Point [x, y, z, rot(y'), rot(z'')] (m, deg) of a 4x4 transform whose orientation is
+    Rz(azimuth) Ry(b) Rz(g); `azimuth_deg` stands in for atan2(y, x) on the z axis."""
     x, y, z = (float(v) for v in h[:3, 3])
     a = math.atan2(y, x) if azimuth_deg is None or math.hypot(x, y) > 1e-12 else azimuth_deg * _R
     r = np.array([[math.cos(a), math.sin(a), 0], [-math.sin(a), math.cos(a), 0], [0, 0, 1.0]]) @ h[:3, :3]
@@ -110,10 +116,12 @@ class AsibotSolver:
 
     @property
     def tool(self) -> np.ndarray | None:
+        """A copy of the 4x4 tool frame on the flange, or None when there is no tool."""
         return None if self._tool is None else self._tool.copy()
 
     # -- forward -------------------------------------------------------------------------
-    def _flange(self, q: Sequence[float]) -> list[float]:
+    def flange(self, q: Sequence[float]) -> list[float]:
+        """Point (m, deg) of the flange for joints q (deg): fwd without the tool."""
         q1, q2, q3, q4, q5 = (v * _R for v in q)
         s2, s23, s234 = math.sin(q2), math.sin(q2 + q3), math.sin(q2 + q3 + q4)
         c2, c23, c234 = math.cos(q2), math.cos(q2 + q3), math.cos(q2 + q3 + q4)
@@ -121,17 +129,30 @@ class AsibotSolver:
         hp = self.a1 * c2 + self.a2 * c23 + self.a3 * c234
         oyp = q[1] + q[2] + q[3]
         ozpp = q[4]
-        if rp < -1e-12:  # the asibot.md 1.4 caveat, fixed: azimuth is q1 + 180
+        if rp < -1e-12:  # the published fwdKin caveat, fixed: azimuth is q1 + 180
             oyp, ozpp = -oyp, ozpp + 180.0
         return [rp * math.cos(q1), rp * math.sin(q1), hp + self.a0, oyp, _wrap180(ozpp)]
 
     def fwd(self, q: Sequence[float]) -> list[float]:
         """Point [x, y, z, rot(y'), rot(z'')] (m, deg) of joints q (deg)."""
         _check(q, 5, "joint values")
-        x = self._flange(q)
+        x = self.flange(q)
         if self._tool is None:
             return x
-        return _point(_h_flange(self, q) @ self._tool, q[0])
+        return transform_point(self.flange_transform(q) @ self._tool, q[0])
+
+    def flange_transform(self, q: Sequence[float]) -> np.ndarray:
+        """4x4 flange transform straight from the joints q (deg); keeps q1 as the azimuth
+        when the tip is on the axis."""
+        q1, q5 = q[0] * _R, q[4] * _R
+        p = self.flange(q)
+        b = (q[1] + q[2] + q[3]) * _R
+        rz = lambda t: np.array([[math.cos(t), -math.sin(t), 0], [math.sin(t), math.cos(t), 0], [0, 0, 1.0]])
+        ry = np.array([[math.cos(b), 0, math.sin(b)], [0, 1.0, 0], [-math.sin(b), 0, math.cos(b)]])
+        h = np.eye(4)
+        h[:3, :3] = rz(q1) @ ry @ rz(q5)
+        h[:3, 3] = p[:3]
+        return h
 
     # -- inverse -------------------------------------------------------------------------
     def inv(self, x: Sequence[float], q_guess: Sequence[float]) -> list[float]:
@@ -141,11 +162,11 @@ class AsibotSolver:
         _check(x, 5, "point")
         _check(q_guess, 5, "joint guess")
         if self._tool is not None:
-            h = _h(x) @ np.linalg.inv(self._tool)
-            xf = _point(h, q_guess[0])
+            h = point_transform(x) @ np.linalg.inv(self._tool)
+            xf = transform_point(h, q_guess[0])
         else:
             xf = list(x)
-        cands = self._candidates(xf, q_guess, x)
+        cands = self.configurations(xf, q_guess, x)
         valid = [(i, c) for i, c in enumerate(cands) if self._within(c)]
         if not valid:
             worst = min(cands, key=self._excess)
@@ -155,7 +176,12 @@ class AsibotSolver:
                              "choose a closer or less tilted point.")
         return list(_select(valid, q_guess))
 
-    def _candidates(self, x: Sequence[float], q_guess: Sequence[float], shown: Sequence[float]) -> list[list[float]]:
+    def configurations(self, x: Sequence[float], q_guess: Sequence[float],
+                       shown: Sequence[float] | None = None) -> list[list[float]]:
+        """The four joint solutions (deg) of flange point x, in the order FORWARD UP, FORWARD
+        DOWN, REVERSED UP, REVERSED DOWN, limits not checked; q_guess gives q1 on the axis
+        and the turns of q1 and q5. Raises Unreachable (about `shown`, default x)."""
+        shown = x if shown is None else shown
         xd, yd, zd = x[0], x[1], x[2]
         rpd = math.hypot(xd, yd)
         hpd = zd - self.a0
@@ -219,7 +245,7 @@ class AsibotSolver:
 
     # -- differential --------------------------------------------------------------------
     def jacobian(self, q: Sequence[float]) -> np.ndarray:
-        """6x5 base-frame Jacobian (asibot.md 1.6): rows vx, vy, vz [m/rad], wx, wy, wz [rad/rad]
+        """6x5 base-frame Jacobian (the published one): rows vx, vy, vz [m/rad], wx, wy, wz [rad/rad]
         of the flange, columns q1..q5 in rad (q itself is given in degrees)."""
         _check(q, 5, "joint values")
         q1, q2, q3, q4, _ = (v * _R for v in q)
@@ -239,28 +265,15 @@ class AsibotSolver:
 
     # -- batch ---------------------------------------------------------------------------
     def fwd_batch(self, q: np.ndarray) -> np.ndarray:
-        """fwd for N joint rows (deg) at once, no tool: returns N x 5 points."""
+        """fwd for N joint rows (deg) at once, at the tool frame if one is set: N x 5 points."""
         from .batch import fwd_batch
         return fwd_batch(self, q)
 
     def inv_batch(self, x: np.ndarray, q_guess: Sequence[float] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """inv for N points at once, no tool: returns (N x 5 joints in deg, ok mask); rows that
-        fail are NaN. q_guess is one row for all or N rows."""
+        """inv for N points at once, of the tool frame if one is set: returns (N x 5 joints in
+        deg, ok mask); rows that fail are NaN. q_guess is one row for all or N rows."""
         from .batch import inv_batch
         return inv_batch(self, x, q_guess)
-
-
-def _h_flange(s: AsibotSolver, q: Sequence[float]) -> np.ndarray:
-    """Flange transform straight from the joints (keeps q1 when the tip is on the axis)."""
-    q1, q5 = q[0] * _R, q[4] * _R
-    p = s._flange(q)
-    b = (q[1] + q[2] + q[3]) * _R
-    rz = lambda t: np.array([[math.cos(t), -math.sin(t), 0], [math.sin(t), math.cos(t), 0], [0, 0, 1.0]])
-    ry = np.array([[math.cos(b), 0, math.sin(b)], [0, 1.0, 0], [-math.sin(b), 0, math.cos(b)]])
-    h = np.eye(4)
-    h[:3, :3] = rz(q1) @ ry @ rz(q5)
-    h[:3, 3] = p[:3]
-    return h
 
 
 def _neg(a: float) -> float:
@@ -273,16 +286,18 @@ def _first(r: tuple) -> float:
 
 
 def _select(valid: list[tuple[int, list[float]]], q_guess: Sequence[float]) -> list[float]:
-    """leastOverallAngularDisplacement with the published tie rules (asibot.md 1.5 step 11)."""
+    """leastOverallAngularDisplacement with the published tie rules (module docstring)."""
     g0, g1, g2, g3, g4 = q_guess
-    # std::map keyed by the sum: of equal sums the first inserted (FU, FD, RU, RD) stays;
-    # a stable sort keeps that order, and the runner-up must have a strictly larger sum.
+    # Ranked by the sum, equal sums in the order FU, FD, RU, RD (a stable sort). The runner-up
+    # is the next in the ranking even when its sum is equal: an exact tie is decided by the
+    # |dq2| rule below, as the seed decides it (its std::map would drop the second of two equal
+    # keys, but its snap of |q| < 0.001 deg to 0 breaks such ties by a hair, so its own tests
+    # pick elbow DOWN for the tie [-0.318, 0.379, 1.195, 45, 0] from [0, 45, 0, 0, 0]).
     ranked = sorted([(abs(g0 - c[0]) + abs(g1 - c[1]) + abs(g2 - c[2]) + abs(g3 - c[3]) + abs(g4 - c[4]), i, c)
                      for i, c in valid], key=_first)
-    s0, best_i, best = ranked[0]
-    sec = next((r for r in ranked if r[0] != s0), None)
-    if sec is not None:
-        _, sec_i, sec = sec
+    _, best_i, best = ranked[0]
+    if len(ranked) > 1:
+        _, sec_i, sec = ranked[1]
         if (best_i < 2) == (sec_i < 2):  # same FORWARD/REVERSED
             db, ds = abs(q_guess[1] - best[1]), abs(q_guess[1] - sec[1])
             if ds < db or (ds == db and sec_i % 2 == 0):

@@ -39,7 +39,7 @@ def _zyz(a: np.ndarray, b: np.ndarray, g: np.ndarray, position: np.ndarray) -> n
 
 
 def _points(h: np.ndarray, azimuth_deg: np.ndarray) -> np.ndarray:
-    """N x 5 points of N transforms (the batch form of asibot_solver._point)."""
+    """N x 5 points of N transforms (the batch form of asibot_solver.transform_point)."""
     x, y = h[:, 0, 3], h[:, 1, 3]
     a = np.where(np.hypot(x, y) > 1e-12, np.arctan2(y, x), azimuth_deg * _R)
     ca, sa = np.cos(a), np.sin(a)
@@ -141,7 +141,7 @@ def _inv_chunk(s: "AsibotSolver", x: np.ndarray, g: np.ndarray) -> tuple[np.ndar
     lo = np.array(s.lower) - 1e-3
     hi = np.array(s.upper) + 1e-3
     gg = g[:, None, :]
-    for j in (0, 4):  # circular joints: the turn nearest the guess within limits (as AsibotSolver._wrap)
+    for j in (0, 4):  # circular joints: the turn nearest the guess within limits (as AsibotSolver._turn)
         v = c[..., j]
         d = v - gg[..., j]
         v[:] = np.where((d > 180.0) & (v - 360.0 >= lo[j]), v - 360.0,
@@ -149,9 +149,10 @@ def _inv_chunk(s: "AsibotSolver", x: np.ndarray, g: np.ndarray) -> tuple[np.ndar
     valid = np.all((c >= lo) & (c <= hi), axis=2) & ok[:, None]
     sums = np.where(valid, np.abs(gg - c).sum(2), np.inf)
     rows = np.arange(n)
-    bi = np.argmin(sums, 1)  # first of equal minima, like the std::map insertion order
+    bi = np.argmin(sums, 1)  # first of equal minima: FU, FD, RU, RD, as a stable sort
     bs = sums[rows, bi]
-    rest = np.where(sums > bs[:, None], sums, np.inf)  # runner-up: strictly larger sum
+    rest = sums.copy()
+    rest[rows, bi] = np.inf  # runner-up: the next in the ranking, an equal sum included
     si = np.argmin(rest, 1)
     has2 = np.isfinite(rest[rows, si])
     same_side = (bi < 2) == (si < 2)

@@ -1,11 +1,12 @@
 """The Cartesian control state machine, free of any bus: the server feeds it measurements and
 requests, and asks it at every tick for the next joint reference.
 
-States follow reference/asibot.md section 3.1 (ccnc, ccjc, cclc, ccvc) plus `pointer`.
+States follow the seed's ccnc, ccjc, cclc, ccvc (docs/asibot-conventions.md, "Control states")
+plus `pointer` ("Pointer mode").
 Rules: motion is refused while the estop is engaged ("estop"), without a driver
 ("unavailable"), with a faulted driver ("fault"), and while another planned motion runs
 ("busy"; stop or wait first). Streaming modes (movv, pointer) stop after 200 ms without a new
-command, like the driver's own watchdog (DESIGN.md, Safety).
+command, like the driver's own watchdog (docs/foundation-api.md, "Contracts").
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from typing import Any, Protocol, Sequence
 import numpy as np
 
 from asibot.errors import RpcError
+from asibot.messages import COMMAND_WATCHDOG_S
 
 from . import trajectory
 
@@ -26,14 +28,13 @@ MOVL = "movl"
 MOVV = "movv"
 POINTER = "pointer"
 STATES = (NOT_CONTROLLING, MOVJ, MOVL, MOVV, POINTER)
-#: Streaming watchdog, s (DESIGN.md Safety: 200 ms in velocity mode).
-WATCHDOG = 0.2
 
 
 class Model(Protocol):
     pose_size: int
     def fwd(self, q: np.ndarray) -> np.ndarray: ...
     def inv(self, pose: np.ndarray, q_guess: np.ndarray) -> np.ndarray: ...
+    def inv_path(self, poses: np.ndarray, q0: np.ndarray) -> tuple[np.ndarray, RpcError | None]: ...
 
 
 class Spec(Protocol):
@@ -148,7 +149,7 @@ class Controller:
             return plan.duration
 
     def stream(self, velocity: np.ndarray, now: float, mode: str = MOVV) -> None:
-        """Set or refresh a streamed pose velocity (SI); it lapses after WATCHDOG seconds."""
+        """Set or refresh a streamed pose velocity (SI); it lapses after COMMAND_WATCHDOG_S seconds."""
         with self._lock:
             q0 = self.check_can_move()
             self._check_idle()
@@ -193,7 +194,7 @@ class Controller:
             return None
 
     def _stream_tick(self, now: float) -> Reference | None:
-        if now - self._stream_seen > WATCHDOG:
+        if now - self._stream_seen > COMMAND_WATCHDOG_S:
             self._abort(RpcError("timeout", "No streamed command for 200 ms; the motion was stopped."))
             return self.tick(now)
         dt = 0.0 if self._last_tick is None else now - self._last_tick

@@ -7,7 +7,7 @@ Joints of the URDF that are not in `joint_names` (e.g. gripper fingers) stay at 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -75,12 +75,14 @@ class GenericSolver:
                 q = np.clip(q, self.lower, self.upper)
         return q, float(np.sqrt(err))
 
-    def inv(self, target: np.ndarray, q_guess: Sequence[float], what: str = "The pose") -> np.ndarray:
+    def inv(self, target: np.ndarray, q_guess: Sequence[float],
+            what: str | Callable[[], str] = "The pose") -> np.ndarray:
         """Joints [rad] within limits reaching the 4x4 `target`, starting from q_guess.
 
         Damped least squares (6D error log6, damping grows with the error) from the guess,
         then from the limits' centre and fixed seeds spread over the joint space. Raises JointLimit if only an
-        unclamped solution exists, Unreachable otherwise."""
+        unclamped solution exists, Unreachable otherwise; their sentences start with `what` (or
+        what(), only built on failure)."""
         t = pin.SE3(np.asarray(target, float))
         g = np.clip(np.asarray(q_guess, float), self.lower, self.upper)
         mid = (self.lower + self.upper) / 2
@@ -93,7 +95,9 @@ class GenericSolver:
         for s in seeds[:2]:
             q, err = self._solve(t, s, clamp=False)
             if err < 1e-7:
+                what = what() if callable(what) else what
                 raise JointLimit(f"{what} is reachable only past a joint limit; choose a point closer to the "
                                  "middle of the workspace.")
+        what = what() if callable(what) else what
         raise Unreachable(f"{what} is out of the arm's reach (no joint solution found); choose a closer "
                           "point or another orientation.")

@@ -1,12 +1,13 @@
 """One kinematic interface for the controller, whatever the solver (SI units).
 
 Joints are rad. A pose is the 5-vector [x, y, z, rot(y'), rot(z'')] in m and rad, with the
-ASIBOT convention (asibot.md 1.3) for every arm: orientation Rz(atan2(y, x)) Ry(rot(y'))
-Rz(rot(z'')) of the tool's approach frame. For the Katana, whose lift joints are parallel
-and whose wrist rolls about the approach (ros.md 2.2), this is the natural 5-DOF pose too:
+ASIBOT convention (docs/asibot-conventions.md, "Kinematics") for every arm: orientation
+Rz(atan2(y, x)) Ry(rot(y')) Rz(rot(z'')) of the tool's approach frame. For the Katana, whose
+lift joints are parallel and whose wrist rolls about the approach, this is the natural 5-DOF pose too:
 rot(y') is the approach's tilt from vertical, rot(z'') the roll. The approach frame is the
 tool frame turned so that its z axis points out of the wrist (Katana: the tool's x axis).
 Users see the same 5-vector with angles in degrees (to_user_point / from_user_point).
+A path (movl) is solved by inv_path, which converts units once for the whole path.
 """
 
 from __future__ import annotations
@@ -16,7 +17,10 @@ from typing import Protocol, Sequence
 
 import numpy as np
 
-from .asibot_solver import AsibotSolver, _h, _point, tool_frame
+from asibot.errors import RpcError
+from asibot.poses import point_rotation
+
+from .asibot_solver import AsibotSolver, tool_frame, transform_point
 from .generic_solver import GenericSolver
 
 POSE_SIZE = 5
@@ -27,6 +31,7 @@ class KinematicModel(Protocol):
 
     def fwd(self, q: Sequence[float]) -> np.ndarray: ...
     def inv(self, pose: Sequence[float], q_guess: Sequence[float]) -> np.ndarray: ...
+    def inv_path(self, poses: np.ndarray, q0: Sequence[float]) -> tuple[np.ndarray, RpcError | None]: ...
     def jacobian(self, q: Sequence[float]) -> np.ndarray: ...
     def set_tool(self, tool: Sequence[float] | None) -> None: ...
     def to_user_point(self, pose: Sequence[float]) -> list[float]: ...
@@ -59,6 +64,24 @@ class AsibotModel:
     def inv(self, pose: Sequence[float], q_guess: Sequence[float]) -> np.ndarray:
         q = self.solver.inv(self.to_user_point(pose), [math.degrees(v) for v in q_guess])
         return np.radians(q)
+
+    def inv_path(self, poses: np.ndarray, q0: Sequence[float]) -> tuple[np.ndarray, RpcError | None]:
+        """IK along a path: each row of the N x 5 SI `poses` solved from the previous solution,
+        the first from q0 (rad). Degrees and radians are converted once for the whole path,
+        not per sample. Returns (N x 5 joints in rad, None), or at the first row that fails
+        (the joints of the rows before it, its RpcError)."""
+        points = np.array(poses, float)
+        points[:, 3:] = np.degrees(points[:, 3:])
+        out = np.empty((len(points), 5))
+        q = np.degrees(np.asarray(q0, float)).tolist()
+        inv = self.solver.inv
+        for i, x in enumerate(points.tolist()):
+            try:
+                q = inv(x, q)
+            except RpcError as exc:
+                return np.radians(out[:i]), exc
+            out[i] = q
+        return np.radians(out), None
 
     def jacobian(self, q: Sequence[float]) -> np.ndarray:
         """6x5 [v; w] per rad, see AsibotSolver.jacobian."""
@@ -109,16 +132,30 @@ class PinocchioModel:
         h[:3, :3] = h[:3, :3] @ self.c
         if self._tool is not None:
             h = h @ self._tool
-        return _si(_point(h, math.degrees(q[0])))
+        return _si(transform_point(h, math.degrees(q[0])))
 
     def inv(self, pose: Sequence[float], q_guess: Sequence[float]) -> np.ndarray:
-        user = self.to_user_point(pose)
-        h = _h(user)
+        p = [float(v) for v in pose]
+        h = np.eye(4)
+        h[:3, :3] = point_rotation(p[0], p[1], p[3], p[4])
+        h[:3, 3] = p[:3]
         if self._tool is not None:
             h = h @ np.linalg.inv(self._tool)
         h[:3, :3] = h[:3, :3] @ self.c.T
-        shown = "The point [" + ", ".join(f"{v:.3g}" for v in user) + "]"
+        shown = lambda: "The point [" + ", ".join(f"{v:.3g}" for v in self.to_user_point(p)) + "]"
         return self.solver.inv(h, q_guess, what=shown)
+
+    def inv_path(self, poses: np.ndarray, q0: Sequence[float]) -> tuple[np.ndarray, RpcError | None]:
+        """IK along a path, as AsibotModel.inv_path (SI throughout: nothing to convert)."""
+        out = np.empty((len(poses), len(q0)))
+        q = np.asarray(q0, float)
+        for i, pose in enumerate(np.asarray(poses, float)):
+            try:
+                q = self.inv(pose, q)
+            except RpcError as exc:
+                return out[:i], exc
+            out[i] = q
+        return out, None
 
     def jacobian(self, q: Sequence[float]) -> np.ndarray:
         return self.solver.jacobian(q)

@@ -1,7 +1,7 @@
-"""The seed's handheld-pointer mode (reference/asibot.md 3.3, streaming fwd/bkwd/rot): the
-arm tracks a virtual point in front of the tool; the device gives the orientation, a
-three-way input moves forward / holds / moves backward, and nothing moves unless the
-dead-man input is held.
+"""The seed's handheld-pointer mode (docs/asibot-conventions.md, "Pointer mode": streaming
+fwd/bkwd/rot): the arm tracks a virtual point in front of the tool; the device gives the
+orientation, a three-way input moves forward / holds / moves backward, and nothing moves
+unless the dead-man input is held.
 
 Request of RPC verb `pointer` (the web UI sends it at about 20 Hz; each one keeps the motion
 alive for 200 ms):
@@ -21,7 +21,7 @@ import numpy as np
 
 from asibot.errors import RpcError
 
-#: Default translation speed, m/s (trajectoryRefSpeed, asibot.md 3.2).
+#: Default translation speed, m/s (trajectoryRefSpeed, docs/asibot-conventions.md "Control states").
 DEFAULT_SPEED = 0.05
 MAX_SPEED = 0.1
 #: How fast the tool pitch follows the device, 1/s (reaches it in about half a second).

@@ -1,8 +1,9 @@
 """The kinematics service for one robot: RPC verbs on cart/rpc/<verb>, a control loop that
 sends joint references with velocity feed-forward on arm/command, and cart/state.
 
-User-facing points and joints are in the seed's units (m and deg, asibot.md 1.3) and are
-converted to SI here, at the edge; the Controller and the bus are SI only.
+User-facing points, joints and tool frames are in the seed's units (m and deg,
+docs/asibot-conventions.md "Kinematics") and are converted to SI here, at the edge; the
+Controller and the bus messages are SI only.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import numpy as np
 from asibot import keys
 from asibot.errors import RpcError
 from asibot.messages import ArmCommand, ArmState, CartState, EStop, Event, GripperCommand, GripperState
+from asibot.runtime import Service
 from asibot.timing import Ticker
 
 from .controller import MOVV, POINTER, Controller
@@ -25,7 +27,8 @@ from .pointer import PointerInput, pointer_velocity
 
 log = logging.getLogger(__name__)
 
-#: cart/state rate, Hz (DESIGN.md: 20 Hz or more; the seed streamed FK every 20 ms, asibot.md 3.1).
+#: cart/state rate, Hz (the web UI needs 20 Hz or more; the seed streamed FK every 20 ms,
+#: docs/asibot-conventions.md "Control states").
 STATE_RATE = 50.0
 #: Longest a single `wait` RPC blocks; the client loops for longer waits.
 MAX_WAIT = 10.0
@@ -58,7 +61,7 @@ def optional_number(req: dict, name: str) -> float | None:
     return float(value)
 
 
-class KinematicsServer:
+class KinematicsServer(Service):
     """Wires one Controller to the bus. `model` and `spec` come from the robot catalog."""
 
     def __init__(self, bus: Any, robot: str, model: Any, spec: Any, rate: float = 100.0,
@@ -238,14 +241,19 @@ class KinematicsServer:
         return {"done": done, "state": self.ctl.state}
 
     def tool(self, req: dict) -> dict:
-        """Attach a tool frame (the seed's `tool`) on the flange; no `tool` removes it."""
+        """Attach a tool frame (the seed's `tool`): 'tool' is [x, y, z, rx, ry, rz] in m and deg,
+        the offset and rotation vector (axis times angle) of the tool point from the flange
+        (the ASIBOT) or the approach frame (other arms). Absent, null or all zeros removes it."""
         tool = req.get("tool")
-        if tool is not None and not isinstance(tool, (list, tuple)):
-            raise RpcError("bad_request", "'tool' must be [x, y, z, rx, ry, rz] in m and rad, or null to remove it.")
+        if tool is None:
+            self.model.set_tool(None)
+            return {}
         try:
-            self.model.set_tool(tool)
-        except ValueError as exc:
-            raise RpcError("bad_request", str(exc)) from None
+            tool = numbers(req, "tool", 6)  # user units, like points
+        except RpcError:
+            raise RpcError("bad_request", "'tool' must be [x, y, z, rx, ry, rz] in m and deg (6 finite numbers), "
+                                          f"or null to remove it; got {req['tool']!r}.") from None
+        self.model.set_tool(tool[:3].tolist() + np.radians(tool[3:]).tolist())
         return {}
 
     def act(self, req: dict) -> dict:

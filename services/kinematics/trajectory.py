@@ -1,7 +1,7 @@
 """Trajectories: the seed's order-one and order-three generators, movj and movl planning.
 
-Facts from reference/asibot.md section 3.4 (TrajGen: OrderOneTraj, OrderThreeTraj) and
-section 3.2 (isochronous movj, movl reference speed 0.05 m/s). Everything here is SI and
+Facts from docs/asibot-conventions.md, sections "TrajGen" (OrderOneTraj, OrderThreeTraj) and
+"Control states" (isochronous movj, movl reference speed 0.05 m/s). Everything here is SI and
 vectorised over joints or pose elements; no bus, no clock: callers pass the time.
 """
 
@@ -14,11 +14,11 @@ import numpy as np
 
 from asibot.errors import RpcError
 
-#: movl reference speed, m/s (BasicCartesianControl trajectoryRefSpeed, asibot.md 3.2).
+#: movl reference speed, m/s (BasicCartesianControl trajectoryRefSpeed, "Control states").
 DEFAULT_LINEAR_SPEED = 0.05
-#: movl reference rotation speed, rad/s (real ASIBOT refSpeed 10 deg/s, asibot.md 1.2).
+#: movl reference rotation speed, rad/s (real ASIBOT refSpeed 10 deg/s, "Kinematics" limits).
 DEFAULT_ANGULAR_SPEED = np.radians(10.0)
-#: Fraction of each joint's max velocity a default movj uses (refSpeed 10 / maxVel 25, asibot.md 1.2).
+#: Fraction of each joint's max velocity a default movj uses (refSpeed 10 / maxVel 25, "Kinematics" limits).
 DEFAULT_JOINT_SPEED_FRACTION = 10.0 / 25.0
 #: The cubic's peak velocity is 1.5 times its mean velocity (derivative of 3s^2 - 2s^3 at s = 1/2).
 CUBIC_PEAK = 1.5
@@ -109,11 +109,12 @@ def plan_movj(q0: np.ndarray, q1: np.ndarray, max_velocity: np.ndarray, *,
 
 
 class Kinematics(Protocol):
-    def inv(self, pose: np.ndarray, q_guess: np.ndarray) -> np.ndarray: ...
+    def inv_path(self, poses: np.ndarray, q0: np.ndarray) -> tuple[np.ndarray, RpcError | None]: ...
 
 
-def line_pose(p0: np.ndarray, p1: np.ndarray, s: float) -> np.ndarray:
-    """Pose at fraction s of a straight line: position and orientation angles interpolated linearly."""
+def line_pose(p0: np.ndarray, p1: np.ndarray, s: float | np.ndarray) -> np.ndarray:
+    """Pose at fraction s of a straight line: position and orientation angles interpolated
+    linearly (broadcasts: p0[None, :], p1[None, :], s[:, None] give one pose per row)."""
     return p0 + (p1 - p0) * s
 
 
@@ -150,10 +151,11 @@ def plan_movl(model: Kinematics, q0: np.ndarray, p0: np.ndarray, p1: np.ndarray,
               describe: Callable[[np.ndarray], str] = lambda p: str(np.round(p, 3).tolist())) -> JointPlan:
     """Straight Cartesian line p0 -> p1 (SI poses), checked end to end before any motion.
 
-    The path is sampled, each sample solved by IK from the previous solution; any
-    unreachable sample, joint-limit violation or configuration jump refuses the whole move with
-    the percentage of the path where it happens. `speed` is in m/s. The duration is stretched
-    so no joint exceeds its max velocity.
+    The path is sampled, each sample solved by IK from the previous solution (model.inv_path,
+    one unit conversion for the whole path); the first unreachable sample, joint-limit
+    violation or configuration jump refuses the whole move with the percentage of the path
+    where it happens. `speed` is in m/s. The duration is stretched so no joint exceeds its max
+    velocity.
     """
     p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
     lower, upper, vmax = (np.asarray(a, float) for a in (lower, upper, max_velocity))
@@ -164,26 +166,31 @@ def plan_movl(model: Kinematics, q0: np.ndarray, p0: np.ndarray, p1: np.ndarray,
         raise RpcError("bad_request", f"duration must be a positive number of seconds; got {duration}.")
     n = int(max(100, np.ceil(lin / CHECK_STEP), np.ceil(ang / np.radians(0.5))))
     s = np.linspace(0.0, 1.0, n + 1)
-    qs = np.empty((n + 1, len(q0)))
-    q = np.asarray(q0, float)
-    for i, si in enumerate(s):
-        pose = line_pose(p0, p1, si)
-        where = f"at {si * 100:.0f} % of the path: {describe(pose)}"
-        try:
-            q_next = np.asarray(model.inv(pose, q), float)
-        except RpcError as exc:
-            raise type(exc)(exc.code, f"The point is unreachable {where} ({exc.message})"
-                            if exc.code == "unreachable" else f"{exc.message} ({where})") from None
-        bad = np.flatnonzero((q_next < lower - 1e-9) | (q_next > upper + 1e-9))
-        if bad.size:
-            j = int(bad[0])
-            raise RpcError("joint_limit", f"Joint {j + 1} would pass its limit ({np.degrees(q_next[j]):.1f} deg, "
+    poses = line_pose(p0[None, :], p1[None, :], s[:, None])
+    qs, failure = model.inv_path(poses, np.asarray(q0, float))
+    qs = np.asarray(qs, float)
+
+    def where(i: int) -> str:  # only built for the refusal, not per sample
+        return f"at {s[i] * 100:.0f} % of the path: {describe(poses[i])}"
+
+    # The first problem along the path wins: a joint limit, a jump, or the IK failure after them.
+    over = np.any((qs < lower - 1e-9) | (qs > upper + 1e-9), axis=1)
+    jump = np.zeros(len(qs), bool)
+    jump[1:] = np.max(np.abs(np.diff(qs, axis=0)), axis=1, initial=0.0) > np.radians(20.0)
+    first = np.flatnonzero(over | jump)
+    if first.size:
+        i = int(first[0])
+        if over[i]:
+            j = int(np.flatnonzero((qs[i] < lower - 1e-9) | (qs[i] > upper + 1e-9))[0])
+            raise RpcError("joint_limit", f"Joint {j + 1} would pass its limit ({np.degrees(qs[i, j]):.1f} deg, "
                                           f"allowed {np.degrees(lower[j]):.0f}..{np.degrees(upper[j]):.0f} deg) "
-                                          f"{where}. Choose another target or go there with movj.")
-        if i and np.max(np.abs(q_next - q)) > np.radians(20.0):
-            raise RpcError("unreachable", f"The straight line passes a singularity or configuration change {where}; "
-                                          "use movj for this move or pick an intermediate point.")
-        qs[i] = q = q_next
+                                          f"{where(i)}. Choose another target or go there with movj.")
+        raise RpcError("unreachable", f"The straight line passes a singularity or configuration change "
+                                      f"{where(i)}; use movj for this move or pick an intermediate point.")
+    if failure is not None:
+        exc, at = failure, where(len(qs))
+        raise type(exc)(exc.code, f"The point is unreachable {at} ({exc.message})"
+                        if exc.code == "unreachable" else f"{exc.message} ({at})") from None
     if lin == 0.0 and ang == 0.0:
         return JointPlan(0.0, lambda t: qs[-1].copy(), lambda t: np.zeros(len(q0)))
     T = duration if duration is not None else max(lin / (speed or DEFAULT_LINEAR_SPEED),

@@ -1,6 +1,6 @@
 """Joint tracking with a driver's safety rules, independent of MuJoCo and of the bus.
 
-Why a separate class: the sim must behave exactly like a hardware driver (DESIGN.md, driver
+Why a separate class: the sim must behave exactly like a hardware driver (docs/foundation-api.md, "Contracts": driver
 contract), and the rules (limits, max speeds, 200 ms watchdog, latched estop, following-error
 fault) are easier to trust when they are tested without a physics engine. The class turns
 `ArmCommand`s into a position reference per physics step; the physics engine then follows
@@ -15,10 +15,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from asibot.messages import ArmCommand
-
-WATCHDOG_S = 0.2
-"""Velocity mode stops when no command came for this long (DESIGN.md, Safety)."""
+from asibot.messages import COMMAND_WATCHDOG_S, ArmCommand
 FEEDFORWARD_HORIZON_S = 0.05
 """Longest extrapolation of a position reference by its velocity feed-forward."""
 FOLLOWING_ERROR_RAD = 0.25
@@ -134,11 +131,11 @@ class JointTracker:
     # ------------------------------------------------------------------ the step
     def step(self, q_measured: np.ndarray, dt: float, now: float) -> np.ndarray:
         """Advance the reference by dt and return it (rad), within limits and speeds."""
-        if self.mode == "velocity" and not self._watchdog_fired and now - self._command_time > WATCHDOG_S:
+        if self.mode == "velocity" and not self._watchdog_fired and now - self._command_time > COMMAND_WATCHDOG_S:
             self._watchdog_fired = True
             self.hold()
             self.notify(Notice("warning", "watchdog",
-                               f"No arm command for {WATCHDOG_S * 1000:.0f} ms in velocity mode; the arm stopped."))
+                               f"No arm command for {COMMAND_WATCHDOG_S * 1000:.0f} ms in velocity mode; the arm stopped."))
         if self.mode == "velocity" and self._target is None:
             self.q_ref = np.clip(self.q_ref + self._velocity * dt, self.limits.lower, self.limits.upper)
         elif self._target is not None:

@@ -1,9 +1,9 @@
 """The mobile base's driver rules (watchdog, estop, speed and acceleration limits) and its
 odometry, independent of MuJoCo and of the bus.
 
-Numbers: P3-AT MaxVelocity 1.2 m/s and MaxRVelocity 300 deg/s (reference/ros.md 1.8,
-ARIA p3at-sh.p). ARIA leaves accelerations to the firmware; we use the p2os navigation
-limits acc_lim_x 2.5 m/s^2 and acc_lim_th 3.2 rad/s^2 (ros.md 1.8) as the ramp.
+Numbers (docs/arcos.md, "P3-AT parameters"): P3-AT MaxVelocity 1.2 m/s and MaxRVelocity
+300 deg/s (ARIA p3at-sh.p). ARIA leaves accelerations to the firmware; we use the p2os
+navigation limits acc_lim_x 2.5 m/s^2 and acc_lim_th 3.2 rad/s^2 as the ramp.
 """
 
 from __future__ import annotations
@@ -14,7 +14,8 @@ from typing import Callable
 
 import numpy as np
 
-from asibot.sim.arm import WATCHDOG_S, CommandRejected, Notice
+from asibot.messages import COMMAND_WATCHDOG_S
+from asibot.sim.arm import CommandRejected, Notice
 
 MAX_VX = 1.2
 MAX_WZ = math.radians(300.0)
@@ -56,11 +57,11 @@ class BaseDrive:
 
     def step(self, dt: float, now: float) -> tuple[float, float]:
         """Advance the ramp by dt; returns the body velocity (vx m/s, wz rad/s) to apply."""
-        if not self._watchdog_fired and now - self._command_time > WATCHDOG_S:
+        if not self._watchdog_fired and now - self._command_time > COMMAND_WATCHDOG_S:
             self._watchdog_fired = True
             if self._goal != (0.0, 0.0):
                 self.notify(Notice("warning", "watchdog",
-                                   f"No drive command for {WATCHDOG_S * 1000:.0f} ms; the base stopped."))
+                                   f"No drive command for {COMMAND_WATCHDOG_S * 1000:.0f} ms; the base stopped."))
             self._goal = (0.0, 0.0)
         gx, gw = self._goal
         self.vx += float(np.clip(gx - self.vx, -ACC_X * dt, ACC_X * dt))

@@ -1,6 +1,6 @@
 """Occupancy map of a world, generated from its MJCF, so the map and the world never disagree.
 
-Output: ROS map_server format (reference/ros.md 5.6): a binary PGM (P5) with map_saver's
+Output: ROS map_server format (docs/maps.md): a binary PGM (P5) with map_saver's
 colours (occupied 0, free 254, unknown 205) and a YAML with resolution, origin (pose of the
 lower-left pixel), negate 0, occupied_thresh 0.65, free_thresh 0.196. The image's top row
 is the largest y.
@@ -28,7 +28,8 @@ MAPS_DIR = Path(__file__).parent / "maps"
 RESOLUTION_M = 0.05
 FLOOR_CLEARANCE_M = 0.02
 ROBOT_HEIGHT_M = 1.2
-"""P3-AT top plate at 0.274 m (ros.md 1.8) plus the Katana folded above it, rounded up."""
+"""P3-AT top plate at 0.274 m (docs/arcos.md "P3-AT parameters") plus the Katana folded
+above it, rounded up."""
 SAMPLES = 4
 MARGIN_M = 0.2
 FREE, OCCUPIED, UNKNOWN = 254, 0, 205

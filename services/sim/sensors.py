@@ -1,9 +1,9 @@
 """The Pioneer's sonar ring, bumpers and battery, read from the MuJoCo state.
 
-Sonar: each of the 16 transducers (ARIA p3at-sh.p poses, reference/ros.md 1.8) is a cone;
+Sonar: each of the 16 transducers (ARIA p3at-sh.p poses, docs/arcos.md "P3-AT parameters") is a cone;
 we cast three rays across +-10 deg of its axis and keep the nearest echo, up to the sonar
 board's 4.335 m maximum, which is also what a transducer reports without an echo.
-Battery: a 12 V lead-acid pack; p2os warns below 11.75 V and errors below 11.0 V (ros.md 1.8).
+Battery: a 12 V lead-acid pack; p2os warns below 11.75 V and errors below 11.0 V (same section).
 """
 
 from __future__ import annotations

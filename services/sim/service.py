@@ -1,4 +1,4 @@
-"""The sim on the bus: the driver contract of DESIGN.md, spoken by a MuJoCo world.
+"""The sim on the bus: the driver contract (docs/foundation-api.md), spoken by a MuJoCo world.
 
 Physics runs on its own thread (2 ms steps, in 10 ms batches paced by the wall clock, or
 back to back with `fast`); cameras render on another thread from a private copy of the
@@ -8,6 +8,7 @@ configuration, so a slow frame never delays the 100 Hz arm state. All logic live
 
 from __future__ import annotations
 
+import argparse
 import logging
 import threading
 import time
@@ -19,12 +20,17 @@ from asibot import keys
 from asibot import messages as m
 from asibot.bus import Bus
 from asibot.errors import MessageError, RpcError
+from asibot.runtime import Service
+from asibot.sim import viewer
 from asibot.sim.arm import CommandRejected, Notice
 from asibot.sim.cameras import Camera
-from asibot.sim.simulation import Simulation
+from asibot.sim.scene import WORLDS
+from asibot.sim.simulation import Simulation, world_for
 from asibot.timing import Ticker
 
 log = logging.getLogger("asibot.sim")
+
+NAME = "sim"
 
 TICK_S = 0.01
 """Physics batch: 5 steps of 2 ms; the arm state goes out once per batch (100 Hz)."""
@@ -41,9 +47,11 @@ class Options:
     width: int = 320
     height: int = 240
     depth_method: str = "render"
+    viewer: bool = False
+    """Show MuJoCo's viewer on the main thread (needs a DISPLAY)."""
 
 
-class SimService:
+class SimService(Service):
     """Publishes the sim's state and obeys commands, like a hardware driver."""
 
     def __init__(self, bus: Bus, sim: Simulation, options: Options) -> None:
@@ -66,10 +74,11 @@ class SimService:
         self._commands_rejected = 0
         self._frames = 0
         self._rtf = 0.0
-        bus.subscribe_raw(keys.arm_command(rid), self._on_arm_command)
-        bus.subscribe_raw(keys.gripper_command(rid), self._on_gripper_command)
+        bus.subscribe(keys.arm_command(rid), m.ArmCommand, self._on_arm_command, on_reject=self._malformed)
+        bus.subscribe(keys.gripper_command(rid), m.GripperCommand, self._on_gripper_command,
+                      on_reject=self._malformed)
         if sim.base:
-            bus.subscribe_raw(keys.base_cmd_vel(rid), self._on_cmd_vel)
+            bus.subscribe(keys.base_cmd_vel(rid), m.Twist, self._on_cmd_vel, on_reject=self._malformed)
         bus.subscribe(keys.estop(rid), m.EStop, self._on_estop, latest=True)
         bus.watch(keys.controller_alive(rid), self._on_controller)
         for verb, handler in {"status": self._rpc_status, "reset_fault": self._rpc_reset_fault,
@@ -85,12 +94,8 @@ class SimService:
             t.start()
 
     # ------------------------------------------------------------------ commands in
-    def _decode(self, msg_type: type, payload: bytes, what: str):
-        try:
-            return m.decode(msg_type, payload)
-        except MessageError as exc:
-            self._reject(f"Rejected a malformed {what}: {exc}")
-            return None
+    def _malformed(self, key: str, exc: MessageError) -> None:
+        self._reject(f"Rejected a malformed command on {key}: {exc}")
 
     def _reject(self, text: str) -> None:
         self._commands_rejected += 1
@@ -104,29 +109,23 @@ class SimService:
         else:
             self._reject(f"Rejected a command: {exc}.")
 
-    def _on_arm_command(self, key: str, payload: bytes, t: int) -> None:
-        cmd = self._decode(m.ArmCommand, payload, "arm command")
-        if cmd is not None:
-            try:
-                self.sim.command_arm(cmd)
-            except CommandRejected as exc:
-                self._ignored(exc)
+    def _on_arm_command(self, cmd: m.ArmCommand) -> None:
+        try:
+            self.sim.command_arm(cmd)
+        except CommandRejected as exc:
+            self._ignored(exc)
 
-    def _on_gripper_command(self, key: str, payload: bytes, t: int) -> None:
-        cmd = self._decode(m.GripperCommand, payload, "gripper command")
-        if cmd is not None:
-            try:
-                self.sim.command_gripper(cmd.opening)
-            except CommandRejected as exc:
-                self._ignored(exc)
+    def _on_gripper_command(self, cmd: m.GripperCommand) -> None:
+        try:
+            self.sim.command_gripper(cmd.opening)
+        except CommandRejected as exc:
+            self._ignored(exc)
 
-    def _on_cmd_vel(self, key: str, payload: bytes, t: int) -> None:
-        cmd = self._decode(m.Twist, payload, "drive command")
-        if cmd is not None:
-            try:
-                self.sim.command_base(cmd.vx, cmd.wz)
-            except CommandRejected as exc:
-                self._ignored(exc)
+    def _on_cmd_vel(self, cmd: m.Twist) -> None:
+        try:
+            self.sim.command_base(cmd.vx, cmd.wz)
+        except CommandRejected as exc:
+            self._ignored(exc)
 
     def _on_estop(self, msg: m.EStop) -> None:
         self.sim.set_estop(msg.engaged, msg.reason)
@@ -254,7 +253,11 @@ class SimService:
 
     # ------------------------------------------------------------------ runtime hooks
     def run(self, stop: threading.Event) -> None:
-        """Block until asked to stop (or the physics thread dies)."""
+        """Block until asked to stop (or the physics thread dies), showing the viewer if asked."""
+        if self.opt.viewer:
+            viewer.run(self.sim, stop)
+            stop.set()
+            return
         while not stop.wait(0.2):
             if self.stop_event.is_set():
                 raise RuntimeError("the simulation stopped by itself; see the log above")
@@ -268,3 +271,52 @@ class SimService:
         self.stop_event.set()
         for t in self._threads:
             t.join(timeout=1.5)
+
+
+# ---------------------------------------------------------------------- command line
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"camera size must look like 320x240, not {text!r}") from None
+    if not (16 <= w <= 1920 and 16 <= h <= 1080):
+        raise argparse.ArgumentTypeError("camera size must be between 16x16 and 1920x1080")
+    return w, h
+
+
+def _noise(text: str) -> tuple[float, float]:
+    try:
+        lin, ang = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"odometry noise must look like 0.02,0.05, not {text!r}") from None
+    if lin < 0 or ang < 0:
+        raise argparse.ArgumentTypeError("odometry noise fractions must be >= 0")
+    return lin, ang
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--world", choices=sorted(WORLDS), help="world to load (default: the robot's world)")
+    p.add_argument("--fast", action="store_true", help="step as fast as possible instead of real time")
+    p.add_argument("--viewer", action="store_true", help="open MuJoCo's viewer (needs a DISPLAY)")
+    p.add_argument("--camera-hz", type=float, default=10.0, help="camera frame rate; 0 disables cameras")
+    p.add_argument("--camera-size", type=_size, default=(320, 240), help="camera resolution WxH")
+    p.add_argument("--depth-method", choices=["render", "ray"], default="render",
+                   help="depth by OSMesa rendering (default, faster) or by ray casting")
+    p.add_argument("--odom-noise", type=_noise, default=(0.02, 0.05),
+                   help="odometry noise: linear,angular standard deviation as a fraction of speed")
+    p.add_argument("--seed", type=int, default=None, help="seed of the odometry noise")
+
+
+def build(bus: Bus, args: argparse.Namespace) -> SimService:
+    robot = args.robot or (WORLDS[args.world] if args.world else None)
+    if robot is None:
+        raise ValueError("say which robot to simulate: --robot asibot-sim or --robot pioneer-sim (or --world)")
+    world = args.world or world_for(robot)
+    sim = Simulation(robot, world, odom_noise=args.odom_noise, seed=args.seed)
+    width, height = args.camera_size
+    show = args.viewer and viewer.available()
+    if args.viewer and not show:
+        log.warning("--viewer ignored: no DISPLAY; running headless")
+    log.info("simulating %s in the %s world (%s)", robot, world, "fast" if args.fast else "real time")
+    return SimService(bus, sim, Options(fast=args.fast, camera_hz=args.camera_hz, width=width,
+                                        height=height, depth_method=args.depth_method, viewer=show))

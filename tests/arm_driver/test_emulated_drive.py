@@ -8,7 +8,7 @@ import struct
 import pytest
 
 from asibot.arm_driver import objects
-from asibot.arm_driver.emulated_drive import (ABORT_DEVICE_STATE, ABORT_NO_OBJECT, ABORT_READ_ONLY,
+from asibot.arm_driver.emulator.drive import (ABORT_DEVICE_STATE, ABORT_NO_OBJECT, ABORT_READ_ONLY,
                                               ABORT_VALUE_RANGE, EmulatedDrive)
 
 CPR = 160 * 4096 / (2 * math.pi)

@@ -15,7 +15,7 @@ from asibot.arm_driver.units import Units
 
 def test_asibot_counts_match_the_reference_arithmetic():
     u = Units(160, 4096, 0.001)
-    assert u.counts_per_rad * math.pi / 180 == pytest.approx(1820.44, abs=0.01)   # reference 4.2
+    assert u.counts_per_rad * math.pi / 180 == pytest.approx(1820.44, abs=0.01)   # docs/canopen.md "Units"
     assert u.to_counts(2 * math.pi) == 655360
     assert u.velocity_iu(math.radians(25)) / 65536 == pytest.approx(45.51, abs=0.01)
     assert u.to_rad(u.to_counts(0.123456)) == pytest.approx(0.123456, abs=1e-5)

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from asibot.base_driver.emulated_robot import EmulatedP3at
 from asibot.base_driver.emulator import ArcosEmulator
+from asibot.base_driver.emulator.robot import EmulatedP3at
 
 
 class FakeClock:

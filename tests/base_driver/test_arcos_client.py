@@ -6,7 +6,7 @@ import serial
 from asibot.base_driver import codec
 from asibot.base_driver.arcos import ArcosClient, ArcosError, to_firmware
 from asibot.base_driver.codec import Cmd
-from asibot.base_driver.emulated_robot import EmulatedP3at
+from asibot.base_driver.emulator.robot import EmulatedP3at
 from asibot.base_driver.link import open_link
 from asibot.base_driver.params import P3AT, P3AT_SH
 

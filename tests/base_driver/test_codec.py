@@ -1,4 +1,4 @@
-"""ARCOS framing, byte for byte (ros.md 1.1-1.2)."""
+"""ARCOS framing, byte for byte (docs/arcos.md, "Framing" and "Arguments")."""
 
 import pytest
 from hypothesis import given, strategies as st

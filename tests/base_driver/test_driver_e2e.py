@@ -14,6 +14,7 @@ from asibot.base_driver.codec import Cmd, Deframer
 from asibot.base_driver.driver import BaseDriver
 from asibot.base_driver.emulator import ArcosEmulator
 from asibot.base_driver.sip import parse_sip
+from asibot.errors import RpcError
 from asibot.testing import wait_until
 
 
@@ -190,8 +191,8 @@ def test_reset_fault_enables_the_motors(rig):
 
 
 def test_bumping_a_wall_reports_stall_and_bumper():
-    from asibot.base_driver import gridmap
-    from asibot.base_driver.emulated_robot import EmulatedP3at
+    from asibot.base_driver.emulator import gridmap
+    from asibot.base_driver.emulator.robot import EmulatedP3at
     with ArcosEmulator(EmulatedP3at(gridmap.room(2.0, 2.0))) as emu:
         rec = Recorder()
         drv = BaseDriver(emu.url, on_state=rec.state, on_event=rec.event)
@@ -228,8 +229,9 @@ def test_nobody_listening_is_reported_once_and_retried():
         time.sleep(1.5)
         assert rec.codes() == ["disconnected"] and "retrying" in rec.events[0][2]
         assert not drv.connected and drv.cmd_vel(0.2, 0) is False
-        with pytest.raises(ConnectionError, match="not connected"):
+        with pytest.raises(RpcError, match="not connected") as err:
             drv.reset_fault()
+        assert err.value.code == "unavailable"
     finally:
         drv.close()
 

@@ -5,9 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from asibot.base_driver import codec, gridmap
+from asibot.base_driver import codec
 from asibot.base_driver.codec import Cmd, Deframer
-from asibot.base_driver.emulated_robot import EmulatedP3at, Pose
+from asibot.base_driver.emulator import gridmap
+from asibot.base_driver.emulator.robot import EmulatedP3at, Pose
 from asibot.base_driver.params import P3AT
 from asibot.base_driver.sip import parse_sip, parse_sync2
 
@@ -119,7 +120,7 @@ def test_vel2_sets_translation_and_rotation():
 def test_negative_velocity_and_limits():
     r = opened()
     r.receive(codec.command_int(Cmd.VEL, -5000), 0)
-    assert r.target_vel == -1200                           # MaxVelocity (ros.md 1.8)
+    assert r.target_vel == -1200                           # MaxVelocity (docs/arcos.md "P3-AT parameters")
     r.receive(codec.command_int(Cmd.SETV, 400), 0)
     r.receive(codec.command_int(Cmd.VEL, -5000), 0)
     assert r.target_vel == -400

@@ -1,4 +1,4 @@
-"""SIP layout (ros.md 1.5), unit conversions (1.8) and the 15-bit position wrap."""
+"""SIP layout (docs/arcos.md "SIP"), unit conversions ("P3-AT parameters") and the 15-bit position wrap."""
 
 import math
 import struct
@@ -15,7 +15,7 @@ from asibot.base_driver.state import StateTracker, signed15, wrapped_delta
 def crafted_sip(*, ptype=0x33, x=0x7FF0, y=0x0005, th=1024, lv=250, rv=350, batt=125,
                 sb=0x0102, control=0, flags=0x0001, compass=45, sonars=((3, 1200), (12, 4335)),
                 tail=True, battx10=127, rotvel=170) -> bytes:
-    """Built by hand from the table in ros.md 1.5, independently of encode_sip."""
+    """Built by hand from the table in docs/arcos.md "SIP", independently of encode_sip."""
     b = bytes([ptype]) + struct.pack("<HHhhhBHhHB", x, y, th, lv, rv, batt, sb, control, flags, compass)
     b += bytes([len(sonars)])
     for idx, rng in sonars:

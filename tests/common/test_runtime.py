@@ -11,14 +11,17 @@ from asibot.testing import wait_until
 from asibot.timing import Ticker
 
 SERVICE = """
+import sys
 from asibot import runtime
-class Svc:
+NAME = "demo"
+class Svc(runtime.Service):
     def health(self): return {"answer": 42}
     def close(self): print("closed", flush=True)
+def add_arguments(parser): pass
 def build(bus, args):
     bus.serve(f"rb/{args.robot}/cart/rpc/stat", lambda req: {"robot": args.robot})
     return Svc()
-raise SystemExit(runtime.run("demo", build))
+raise SystemExit(runtime.run(sys.modules[__name__]))
 """
 
 
@@ -43,8 +46,9 @@ def test_service_announces_serves_reports_health_and_stops_cleanly(router):
 
 
 def test_a_service_that_cannot_start_says_why_and_exits_1(router):
-    code = "from asibot import runtime\ndef build(bus, args): raise ValueError('no robot called moon')\n" \
-           "raise SystemExit(runtime.run('demo', build))"
+    code = ("import sys\nfrom asibot import runtime\nNAME = 'demo'\ndef add_arguments(p): pass\n"
+            "def build(bus, args): raise ValueError('no robot called moon')\n"
+            "raise SystemExit(runtime.run(sys.modules[__name__]))")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=20)
     assert r.returncode == 1 and "no robot called moon" in r.stderr
 

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from asibot import keys
 from asibot.bus import Bus
 from asibot.testing import free_port, wait_until
 
@@ -37,13 +38,14 @@ class Stack:
         return self.log_path.read_text()
 
     def wait_alive(self, *services: str, timeout: float = 60.0) -> list[str]:
-        want = {f"svc/{s}" for s in services}
+        """Wait until each `<service>/<instance>` announces itself; the live service keys."""
+        want = {keys.service(*s.split("/", 1)) for s in services}
         try:
-            wait_until(lambda: want <= set(self.bus.alive("svc/**")), timeout, interval=0.5)
+            wait_until(lambda: want <= set(self.bus.alive(keys.ALL_SERVICES)), timeout, interval=0.5)
         except AssertionError:
-            missing = sorted(want - set(self.bus.alive("svc/**")))
+            missing = sorted(want - set(self.bus.alive(keys.ALL_SERVICES)))
             raise AssertionError(f"not alive after {timeout} s: {missing}\n{self.log()}") from None
-        return self.bus.alive("svc/**")
+        return self.bus.alive(keys.ALL_SERVICES)
 
     def run(self, *args: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
         """Run a Python program against the stack; on a hang, fail with what it printed."""

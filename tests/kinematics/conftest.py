@@ -1,6 +1,6 @@
-"""Fixtures: an ideal driver and a kinematics server (real Zenoh, in threads) plus a client.
+"""Fixtures: an ideal driver and a kinematics server (in threads, on the in-memory bus) plus a client.
 
-One router, driver and server serve the whole module (a fresh set per test would spend most of
+One bus, driver and server serve the whole module (a fresh set per test would spend most of
 the time on start-up); each test starts from a stopped controller and the same joints. Tests
 that destroy the setup build their own (`fresh`).
 """
@@ -14,10 +14,9 @@ from asibot import testing
 from asibot.bus import Bus
 from asibot.client import CartesianClient
 from asibot.kinematics.server import KinematicsServer
-from asibot.testing import wait_until
+from asibot.testing import IdealDriver, wait_until
 
-from .model import asibot_model, asibot_spec
-from .ideal_driver import IdealDriver
+from .robot_under_test import asibot_model, asibot_spec
 
 ROBOT = "asibot-test"
 START = np.radians([0.0, 5.0, 5.0, 5.0, 0.0])
@@ -40,10 +39,9 @@ def teardown(s: SimpleNamespace) -> None:
 
 
 @pytest.fixture(scope="module")
-def shared():
-    with testing.router() as endpoint:
+def shared(request):
+    with testing.memory_bus(request.node.nodeid):
         s = build(ROBOT)
-        s.router = endpoint
         yield s
         teardown(s)
 
@@ -69,13 +67,8 @@ def server(shared):
 
 
 @pytest.fixture
-def router(shared):
-    return shared.router
-
-
-@pytest.fixture
 def fresh(shared):
-    """A second robot of its own on the shared router, for tests that kill its driver."""
+    """A second robot of its own on the shared bus, for tests that kill its driver."""
     s = build(ROBOT + "-2")
     yield s
     teardown(s)

@@ -7,7 +7,7 @@ from asibot.errors import RpcError
 from asibot.kinematics.controller import MOVJ, MOVV, NOT_CONTROLLING, Controller
 from asibot.kinematics.pointer import PointerInput, pointer_velocity
 
-from .model import asibot_model, asibot_spec
+from .robot_under_test import asibot_model, asibot_spec
 
 Q0 = np.array([0.0, 0.3, 0.6, 0.4, 0.0])
 

@@ -3,20 +3,19 @@
 import os
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from asibot import keys
+from asibot import keys, testing
 from asibot.bus import Bus
 from asibot.errors import RpcError
 from asibot.messages import CartState, EStop, Event
 from asibot.testing import wait_until
 
-from .conftest import ROBOT
+from .conftest import ROBOT, build, teardown
 
 TEMPLATE = Path(__file__).resolve().parents[2] / "libs" / "common" / "examples" / "template.py"
 
@@ -103,7 +102,7 @@ def test_movv_moves_while_streamed_and_watchdog_stops(client):
     assert x1 > x0 + 0.01 and client.stat()[0] == pytest.approx(x1, abs=1e-3)
 
 
-def test_estop_refuses_motion_until_released(client, router):
+def test_estop_refuses_motion_until_released(client):
     bus = Bus("test-estop")
     try:
         bus.latch(keys.estop(ROBOT), EStop(engaged=True, reason="test"))
@@ -190,13 +189,18 @@ def test_closing_on_an_object_reports_the_grasp(client, driver):
 
 
 @pytest.mark.slow
-def test_template_program_end_to_end(server, router):
-    env = dict(os.environ, ASIBOT_ROUTER=router)
-    out = subprocess.run([sys.executable, str(TEMPLATE), ROBOT], env=env, capture_output=True,
-                         text=True, timeout=60)
-    assert out.returncode == 0, out.stderr
-    assert "hello, robot!" in out.stdout and "done!" in out.stdout
-    assert np.allclose(np.asarray(server.model.fwd(server.ctl.q)), [0, 0, 1.4, 0, 0], atol=2e-3)
+def test_template_program_end_to_end():
+    """The user's program is another process: this one needs a real router."""
+    with testing.router() as endpoint:
+        s = build(ROBOT + "-template")
+        try:
+            out = subprocess.run([sys.executable, str(TEMPLATE), s.robot], env=dict(os.environ, ASIBOT_ROUTER=endpoint),
+                                 capture_output=True, text=True, timeout=60)
+            assert out.returncode == 0, out.stderr
+            assert "hello, robot!" in out.stdout and "done!" in out.stdout
+            assert np.allclose(np.asarray(s.server.model.fwd(s.server.ctl.q)), [0, 0, 1.4, 0, 0], atol=2e-3)
+        finally:
+            teardown(s)
 
 
 def test_tool_frame_moves_the_reported_point(client):
@@ -213,5 +217,31 @@ def test_tool_frame_moves_the_reported_point(client):
         assert err.value.code == "bad_request" and "'long'" in str(err.value)
         assert np.allclose(client.stat(), after)  # a refused tool changes nothing
     finally:
-        client._call("tool")  # no tool: back to the flange
+        client.tool(None)  # no tool: back to the flange
     assert np.allclose(client.stat(), before, atol=1e-9)
+
+
+def test_tool_frame_takes_degrees_like_points(client):
+    before = np.array(client.stat())
+    client.tool([0, 0, 0, 0, 0, 90])  # turned 90 deg about the approach axis
+    try:
+        after = np.array(client.stat())
+        assert after[:4] == pytest.approx(before[:4], abs=1e-9)
+        assert after[4] == pytest.approx(before[4] + 90, abs=1e-6)
+    finally:
+        client.tool()
+    assert np.allclose(client.stat(), before, atol=1e-9)
+
+
+def test_the_client_engages_and_releases_the_estop(client):
+    client.estop("a test presses the button")
+    try:
+        assert wait_until(lambda: client.state()["estop"], timeout=5)
+        with pytest.raises(RpcError) as err:
+            client.movj(joints=[10, 0, 0, 0, 0])
+        assert err.value.code == "estop"
+    finally:
+        client.release()
+    assert wait_until(lambda: not client.state()["estop"], timeout=5)
+    client.movj(joints=[1, 5, 5, 5, 0], duration=0.3)
+    assert client.wait(timeout=5)

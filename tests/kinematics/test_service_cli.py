@@ -6,33 +6,16 @@ import numpy as np
 import pytest
 
 from asibot import robots
-from asibot.kinematics.__main__ import add_arguments, build
+from asibot import keys
+from asibot.bus import Bus
+from asibot.kinematics.service import add_arguments, build
 from asibot.kinematics.model import AsibotModel, PinocchioModel
 
 
-class RecordingBus:
-    """Enough of a Bus to construct the server without a router: records what it declares."""
-
-    def __init__(self):
-        self.served = []
-
-    def publisher(self, *a, **k):
-        return self
-
-    def put(self, msg):
-        pass
-
-    def subscribe(self, *a, **k):
-        pass
-
-    def watch(self, *a, **k):
-        pass
-
-    def serve(self, key, handler):
-        self.served.append(key)
-
-    def announce(self, *a, **k):
-        pass
+@pytest.fixture
+def bus(request):
+    with Bus("test", f"mem://{request.node.name}") as b:
+        yield b
 
 
 def parse(*argv):
@@ -47,19 +30,18 @@ def parse(*argv):
     (["--robot", "asibot-sim", "--solver", "pinocchio"], PinocchioModel),
     (["--robot", "pioneer-sim"], PinocchioModel),
 ])
-def test_the_solver_comes_from_the_catalog_or_the_flag(argv, model):
-    bus = RecordingBus()
+def test_the_solver_comes_from_the_catalog_or_the_flag(argv, model, bus):
     server = build(bus, parse(*argv))
     try:
         assert isinstance(server.model, model)
-        assert "rb/%s/cart/rpc/movl" % argv[1] in bus.served
+        assert bus.wait_for(keys.cart_rpc(argv[1], "movl"), 1)
     finally:
         server.close()
 
 
-def test_both_asibot_solvers_agree_through_the_service_model():
-    closed = build(RecordingBus(), parse("--robot", "asibot-sim"))
-    generic = build(RecordingBus(), parse("--robot", "asibot-sim", "--solver", "pinocchio"))
+def test_both_asibot_solvers_agree_through_the_service_model(bus):
+    closed = build(bus, parse("--robot", "asibot-sim"))
+    generic = build(bus, parse("--robot", "asibot-sim", "--solver", "pinocchio"))
     try:
         spec = robots.get("asibot-sim")
         for q in np.random.default_rng(5).uniform(np.array(spec.lower) / 3, np.array(spec.upper) / 3, (20, 5)):
@@ -69,6 +51,10 @@ def test_both_asibot_solvers_agree_through_the_service_model():
         generic.close()
 
 
-def test_the_closed_form_refuses_another_arm():
-    with pytest.raises(SystemExit, match="ASIBOT's closed form"):
-        build(RecordingBus(), parse("--robot", "pioneer-sim", "--solver", "asibot"))
+def test_bad_arguments_are_refused_with_a_sentence(bus):
+    with pytest.raises(ValueError, match="ASIBOT's closed form"):
+        build(bus, parse("--robot", "pioneer-sim", "--solver", "asibot"))
+    with pytest.raises(ValueError, match="unknown robot 'moon'"):
+        build(bus, parse("--robot", "moon"))
+    with pytest.raises(ValueError, match="--robot is required"):
+        build(bus, parse())

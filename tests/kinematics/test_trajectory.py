@@ -6,7 +6,7 @@ import pytest
 from asibot.errors import RpcError
 from asibot.kinematics import trajectory as tr
 
-from .model import asibot_model, asibot_spec
+from .robot_under_test import asibot_model, asibot_spec
 
 
 @pytest.mark.parametrize("cls", [tr.OrderOneTraj, tr.OrderThreeTraj])

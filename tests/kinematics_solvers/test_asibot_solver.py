@@ -8,7 +8,6 @@ from hypothesis import assume, given, settings, strategies as st
 
 from asibot.errors import RpcError
 from asibot.kinematics import AsibotSolver, JointLimit, Unreachable
-from asibot.kinematics.asibot_solver import _h_flange
 
 S = AsibotSolver()
 ang = lambda lim: st.floats(-lim, lim, allow_nan=False)
@@ -32,7 +31,7 @@ def test_published_fk_for_forward_lean():
 
 
 def test_orientation_fixed_behind_the_azimuth():
-    # asibot.md 1.4: q = (0, -45, 0, 0, 0) is Ry(-45), i.e. azimuth 180, rot(y') 45, rot(z'') 180.
+    # docs/asibot-conventions.md, "Kinematics": q = (0, -45, 0, 0, 0) is Ry(-45), i.e. azimuth 180, rot(y') 45, rot(z'') 180.
     p = S.fwd([0, -45, 0, 0, 0])
     assert p[0] < 0 and p[3] == pytest.approx(45) and abs(p[4]) == pytest.approx(180)
 
@@ -44,7 +43,7 @@ def test_round_trip_returns_same_point(q):
     q2 = S.inv(p, q)
     # Compare the flange transforms: the 5-tuple jumps where the tip crosses the q1 axis.
     # Near the stretched elbow, q3 is ill-conditioned (sqrt(1 - c3^2)): 1e-7 is the float limit.
-    assert np.allclose(_h_flange(S, q2), _h_flange(S, q), atol=1e-7)
+    assert np.allclose(S.flange_transform(q2), S.flange_transform(q), atol=1e-7)
 
 
 @settings(max_examples=200, deadline=None)
@@ -62,7 +61,7 @@ def test_round_trip_from_own_joints_gives_them_back(q):
 def test_every_configuration_is_selected_from_a_nearby_guess(config):
     base = [30, 20, 40, 30, 10]
     p = S.fwd(base)
-    fd = S._candidates(p, base, p)
+    fd = S.configurations(p, base, p)
     names = ["FU", "FD", "RU", "RD"]
     target = fd[names.index(config)]
     got = S.inv(p, target)
@@ -109,9 +108,31 @@ def test_tie_prefers_elbow_up():
     q = S.inv([0, 0, 1.4, 0, 0], [0] * 5)
     assert q == pytest.approx([0, 0, 0, 0, 0], abs=1e-5) and q[2] >= 0  # UP has q3 >= 0
     p = S.fwd([0, 30, 40, 20, 0])
-    fu, fd = S._candidates(p, [0] * 5, p)[:2]
+    fu, fd = S.configurations(p, [0] * 5, p)[:2]
     mid = list((np.array(fu) + np.array(fd)) / 2)  # equidistant from FU and FD
     assert S.inv(p, mid) == pytest.approx(fu)
+
+
+SEED_LIMITS = [(-180, 180), (-135, 135), (-135, 135), (-135, 135), (-180, 180)]
+
+
+@pytest.mark.parametrize("limits", [None, SEED_LIMITS], ids=["ours", "seed-test-limits"])
+@pytest.mark.parametrize("point, elbow_down", [
+    # roboticslab-uc3m/kinematics-dynamics tests/testAsibotSolverFromFile.cpp, AsibotSolverInvKin3
+    # and InvKin4 (FORWARD cases), guess [0, 45, 0, 0, 0]: FU [az, 0, 45, 0, 0] and FD
+    # [az, 45, -45, 45, 0] are both 220 deg away; "selects elbow-down on
+    # LeastOverallAngularDisplacement strategy", by the smaller |dq2|.
+    ([-0.318163634, 0.379172654, 1.194974747, 45.0, 0.0], [130, 45, -45, 45, 0]),
+    ([-0.379172654, 0.318163634, 1.194974747, 45.0, 0.0], [140, 45, -45, 45, 0]),
+])
+def test_exact_tie_is_decided_by_dq2_like_the_seed(limits, point, elbow_down):
+    s = AsibotSolver() if limits is None else AsibotSolver(limits=limits)
+    guess = [0, 45, 0, 0, 0]
+    fu, fd = s.configurations(point, guess, point)[:2]
+    assert sum(abs(np.subtract(fu, guess))) == pytest.approx(sum(abs(np.subtract(fd, guess))), abs=1e-9)
+    assert s.inv(point, guess) == pytest.approx(elbow_down, abs=1e-3)
+    q, ok = s.inv_batch(np.array([point]), guess)
+    assert ok[0] and q[0] == pytest.approx(elbow_down, abs=1e-3)
 
 
 @settings(max_examples=100, deadline=None)
@@ -123,15 +144,14 @@ def test_jacobian_matches_numeric_differentiation(q):
     for k in range(5):
         dq = np.zeros(5)
         dq[k] = math.degrees(h)
-        num[:, k] = (np.array(S._flange(list(np.add(q, dq)))[:3]) - np.array(S._flange(list(np.subtract(q, dq)))[:3])) / (2 * h)
+        num[:, k] = (np.array(S.flange(list(np.add(q, dq)))[:3]) - np.array(S.flange(list(np.subtract(q, dq)))[:3])) / (2 * h)
     assert np.allclose(j[:3], num, atol=1e-6)
     # angular part: rotation axis of each joint
-    from asibot.kinematics.asibot_solver import _h_flange
     for k in range(5):
         dq = np.zeros(5)
         dq[k] = math.degrees(h)
-        r1 = _h_flange(S, list(np.add(q, dq)))[:3, :3]
-        r0 = _h_flange(S, list(np.subtract(q, dq)))[:3, :3]
+        r1 = S.flange_transform(list(np.add(q, dq)))[:3, :3]
+        r0 = S.flange_transform(list(np.subtract(q, dq)))[:3, :3]
         w = r1 @ r0.T
         num_w = np.array([w[2, 1] - w[1, 2], w[0, 2] - w[2, 0], w[1, 0] - w[0, 1]]) / 2 / (2 * h)
         assert np.allclose(j[3:, k], num_w, atol=1e-5)

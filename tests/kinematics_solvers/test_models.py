@@ -8,7 +8,6 @@ import pytest
 
 from asibot import robots
 from asibot.kinematics import AsibotSolver, GenericSolver, JointLimit, Unreachable, solver_for
-from asibot.kinematics.asibot_solver import _h_flange
 
 ASI = robots.get("asibot")
 KAT = robots.get("pioneer")
@@ -43,7 +42,7 @@ def test_urdf_loads_in_mujoco_and_pinocchio(spec):
 def test_urdf_fk_equals_closed_form():
     g = GenericSolver(ASI.urdf_path, ASI.tool_link, ASI.joint_names)
     for q in RNG.uniform(ASI.lower, ASI.upper, (200, 5)):
-        assert np.allclose(g.fwd(q), _h_flange(AsibotSolver(), list(np.degrees(q))), atol=1e-9)
+        assert np.allclose(g.fwd(q), AsibotSolver().flange_transform(list(np.degrees(q))), atol=1e-9)
 
 
 def test_generic_ik_agrees_with_closed_form_on_the_asibot():
@@ -127,3 +126,21 @@ def test_katana_tool_frame_extends_the_approach_and_inverts():
     assert np.allclose(m.fwd(q), bare)
     with pytest.raises(ValueError, match="6 finite numbers"):
         m.set_tool([0, 0, math.nan, 0, 0, 0])
+
+
+@pytest.mark.parametrize("rid", ["asibot-sim", "pioneer-sim"])
+def test_inv_path_solves_each_sample_from_the_previous_like_inv(rid):
+    spec = robots.get(rid)
+    m = solver_for(spec)
+    q0 = np.asarray(spec.home, float) * 0.5 + 0.2
+    p0, p1 = m.fwd(q0), m.fwd(q0 + 0.1)
+    poses = p0 + (p1 - p0) * np.linspace(0, 1, 6)[:, None]
+    qs, failure = m.inv_path(poses, q0)
+    assert failure is None and qs.shape == (6, 5)
+    q = q0
+    for pose, got in zip(poses, qs):
+        q = m.inv(pose, q)
+        assert np.allclose(got, q, atol=1e-9)
+    far = np.vstack([poses, [5.0, 0, 0, 0, 0]])  # the last one out of reach
+    qs, failure = m.inv_path(far, q0)
+    assert isinstance(failure, Unreachable) and len(qs) == 6

@@ -9,30 +9,39 @@ Run it after a deliberate change to the kitchen or the controller, and commit th
 
 from __future__ import annotations
 
-import sys
+import argparse
+import importlib.util
 import tempfile
 from pathlib import Path
 
+from asibot import keys
+from asibot.recording.reader import iter_messages
+from asibot.recording.writer import LeanWriter
+
 ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "tests" / "e2e"))
-from conftest import EXAMPLES, Stack  # noqa: E402  the end-to-end tests' `asibot up`
-
-from asibot import keys  # noqa: E402
-from asibot.mcap_writer import LeanWriter  # noqa: E402
-from asibot.recordings import iter_messages  # noqa: E402
-
+E2E = ROOT / "tests" / "e2e" / "conftest.py"  # the end-to-end tests' `asibot up`: Stack, EXAMPLES
 ROBOT = "asibot-sim"
 FIXTURE = ROOT / "recordings" / "fixtures" / "red_can.mcap"
 KEEP = (keys.arm_state(ROBOT), keys.arm_command(ROBOT), keys.cart_state(ROBOT),
         keys.gripper_state(ROBOT), keys.gripper_command(ROBOT))
 
 
+def e2e():
+    """The end-to-end tests' conftest, loaded from its file (it is no importable module)."""
+    spec = importlib.util.spec_from_file_location("e2e_conftest", E2E)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def main() -> int:
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
+    up = e2e()
     with tempfile.TemporaryDirectory() as folder:
-        stack = Stack(Path(folder), "sim", ["recorder", "kinematics-asibot-sim"])
+        stack = up.Stack(Path(folder), "sim", ["recorder", "kinematics-asibot-sim"])
         try:
             stack.wait_alive("sim/asibot-sim", "kinematics/asibot-sim", "recorder/main")
-            out = stack.run("-u", str(EXAMPLES / "give_me_the_red_can.py"), ROBOT)
+            out = stack.run("-u", str(up.EXAMPLES / "give_me_the_red_can.py"), ROBOT)
             print(out.stdout, out.stderr)
             if out.returncode != 0:
                 return 1

@@ -1,14 +1,9 @@
 """Fixtures: fresh simulations of both worlds (fast: built in a fraction of a second)."""
 
-import sys
-from pathlib import Path
-
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent))  # sim_reach
-
-from asibot import robots  # noqa: E402
-from asibot.sim.simulation import Simulation  # noqa: E402
+from asibot import robots
+from asibot.sim.simulation import Simulation
 
 
 @pytest.fixture

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from asibot.messages import ArmCommand
-from asibot.sim.arm import WATCHDOG_S, CommandRejected, JointLimits, JointTracker
+from asibot.messages import COMMAND_WATCHDOG_S
+from asibot.sim.arm import CommandRejected, JointLimits, JointTracker
 
 DT = 0.002
 
@@ -59,7 +60,7 @@ def test_velocity_mode_stops_after_the_watchdog_and_says_so():
     t = tracker(notices)
     t.command(ArmCommand(mode="velocity", values=[0.4, 0.0]), 0.0)
     run(t, 1.0)
-    assert t.q_ref[0] == pytest.approx(0.4 * WATCHDOG_S, abs=2 * DT)
+    assert t.q_ref[0] == pytest.approx(0.4 * COMMAND_WATCHDOG_S, abs=2 * DT)
     assert [n.code for n in notices] == ["watchdog"]
 
 

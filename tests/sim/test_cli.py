@@ -4,7 +4,7 @@ import argparse
 
 import pytest
 
-from asibot.sim.__main__ import _noise, _size, add_arguments
+from asibot.sim.service import _noise, _size, add_arguments
 
 
 def parser():

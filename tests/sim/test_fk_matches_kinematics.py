@@ -71,7 +71,8 @@ def test_katana_sim_fk_equals_the_generic_solver(apartment, robot_catalog):
 
 
 def test_asibot_sim_fk_equals_the_published_formula(kitchen):
-    """reference/asibot.md 1.4: rP, hP in the arm's plane; x = rP cos q1, y = rP sin q1, z = hP + A0."""
+    """docs/asibot-conventions.md "Kinematics": rP, hP in the arm's plane; x = rP cos q1,
+    y = rP sin q1, z = hP + A0."""
     a0, a1, a2, a3 = 0.3, 0.4, 0.4, 0.3
     rng = np.random.default_rng(3)
     for _ in range(N):

@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from sim_reach import move_to, solve_down
+from .sim_reach import move_to, solve_down
 
 from asibot.messages import ArmCommand
 from asibot.sim.arm import CommandRejected

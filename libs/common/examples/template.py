@@ -1,4 +1,4 @@
-"""The seed's template program (asibot.md 5.4) in Python 3. Robot: argv[1], ASIBOT_ROBOT, or asibot-sim."""
+"""The seed's Task Creator template program, in Python 3. Robot: argv[1], ASIBOT_ROBOT, or asibot-sim."""
 
 import os
 import sys

@@ -2,10 +2,11 @@
 
 Bytes in (`receive`), bytes out (`receive`'s echoes and `step`'s SIPs); time is passed in,
 so tests can drive it deterministically and the emulator server can run it in real time.
-Behaviour from /work/shared/reference/ros.md section 1: sync echoes and the SYNC2 strings
-(1.3), a SIP every 100 ms (1.5), VEL/RVEL/VEL2/E_STOP (1.4, 1.6), the 2 s watchdog after
-which motion resumes toward the last setpoints when commands return (1.6), 15-bit
-positions and p3at-sh units (1.8), sonar ring poses and 4335 mm range (1.8).
+Behaviour from docs/arcos.md: sync echoes and the SYNC2 strings ("Connection"), a SIP every
+100 ms ("SIP"), VEL/RVEL/VEL2/E_STOP ("Commands", "Motion and watchdog"), the 2 s watchdog
+after which motion resumes toward the last setpoints when commands return ("Motion and
+watchdog"), 15-bit positions ("SIP"), p3at-sh units, sonar ring poses and 4335 mm range
+("P3-AT parameters").
 """
 
 from __future__ import annotations
@@ -15,21 +16,22 @@ import math
 
 from asibot.base_driver import codec
 from asibot.base_driver.codec import Cmd
-from asibot.base_driver.gridmap import GridMap, room
+from asibot.base_driver.emulator.gridmap import GridMap, room
 from asibot.base_driver.params import P3AT_SH, SONAR_MAX_RANGE_MM, SONAR_POSES, RobotParams
 from asibot.base_driver.sip import FLAG_MOTORS_ENABLED, STALL_LEFT, STALL_RIGHT, Sip, encode_sip, encode_sync2
 
-#: ARCOS default SIP cycle (ros.md 1.5).
+#: ARCOS default SIP cycle (docs/arcos.md "SIP").
 SIP_PERIOD = 0.1
-#: ARCOS watchdog, nominally two seconds (ros.md 1.6).
+#: ARCOS watchdog, nominally two seconds (docs/arcos.md "Motion and watchdog").
 WATCHDOG = 2.0
-#: Acceleration limits of the emulator. The reference gives no P3-AT firmware defaults
-#: (SETA/SETRA change them at run time), so these are the emulator's own choice.
+#: Acceleration limits of the emulator. The sources give no P3-AT firmware defaults
+#: (SETA/SETRA change them at run time), so these are the emulator's own choice
+#: (docs/arcos.md "Motion and watchdog").
 TRANS_ACCEL = 1000.0   # mm/s^2
 ROT_ACCEL = 300.0      # deg/s^2
-#: How long a stall cuts motor power (ARCOS StallCount; the firmware value is not in the reference).
+#: How long a stall cuts motor power (ARCOS StallCount; the firmware value is not in the sources).
 STALL_TIME = 1.0
-#: Half of RobotLength 626 mm (ros.md 1.8): the disc used for collisions.
+#: Half of RobotLength 626 mm (docs/arcos.md "P3-AT parameters"): the disc used for collisions.
 BODY_RADIUS = 0.313
 
 
@@ -113,7 +115,8 @@ class EmulatedP3at:
             return self._handle_sync(cmd, payload, now)
         self._last_command = now
         if self.watchdog_tripped:
-            self.watchdog_tripped = False   # motion resumes toward the last setpoints (ros.md 1.6)
+            # Motion resumes toward the last setpoints (docs/arcos.md "Motion and watchdog").
+            self.watchdog_tripped = False
         if cmd == Cmd.CLOSE:
             self._close()
         elif cmd == Cmd.ENABLE and arg is not None:
@@ -203,7 +206,7 @@ class EmulatedP3at:
         nx, ny = self.pose.x + d * math.cos(mid), self.pose.y + d * math.sin(mid)
         if d != 0.0 and self.world.disc_hits(nx, ny, BODY_RADIUS):
             self.bumped_front, self.bumped_rear = d > 0, d < 0
-            self.stalled = True             # wheels blocked: ARCOS cuts motor power (ros.md 1.6)
+            self.stalled = True             # wheels blocked: ARCOS cuts motor power ("Motion and watchdog")
             self._stall_until = now + STALL_TIME
             self.vel = self.rot = 0.0
             return

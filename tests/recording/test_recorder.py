@@ -11,13 +11,14 @@ import pytest
 from asibot import keys, messages as m
 from asibot.bus import Bus
 from asibot.cli import main as asibot
-from asibot.recordings import NotARecording, iter_messages, list_recordings, summarize
-from asibot.replay import replay
+from asibot.recording.reader import NotARecording, iter_messages, list_recordings, summarize
+from asibot.recording.recorder import McapRecorder
+from asibot.recording.replay import replay
 from asibot.testing import wait_until
 
 
 def start_recorder(directory: Path) -> subprocess.Popen:
-    p = subprocess.Popen([sys.executable, "-m", "asibot.recorder", "--dir", str(directory)],
+    p = subprocess.Popen([sys.executable, "-m", "asibot.recording", "--dir", str(directory)],
                          stderr=subprocess.PIPE, text=True)
     for line in p.stderr:
         if "running" in line:
@@ -83,7 +84,6 @@ def test_record_then_replay_reproduces_topics_payloads_and_timing(router, tmp_pa
 
 
 def test_replay_as_fast_as_possible_and_filters(router, tmp_path):
-    from asibot.recorder import McapRecorder
     path = tmp_path / "x.mcap"
     r = McapRecorder(path)
     for i in range(100):
@@ -123,7 +123,6 @@ def test_killed_recorder_file_is_recovered(router, tmp_path, capsys):
 
 
 def test_recorder_never_overwrites(tmp_path):
-    from asibot.recorder import McapRecorder
     (tmp_path / "a.mcap").write_bytes(b"precious")
     with pytest.raises(FileExistsError):
         McapRecorder(tmp_path / "a.mcap")

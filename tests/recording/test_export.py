@@ -20,10 +20,11 @@ from mcap.reader import make_reader
 
 from asibot import keys, messages as m
 from asibot.cli import main as asibot
-from asibot.export import export_foxglove
-from asibot.mcap_writer import LeanWriter
 from asibot.poses import point_rotation
-from asibot.recordings import NotARecording
+from asibot.recording import export
+from asibot.recording.export import export_foxglove
+from asibot.recording.reader import NotARecording
+from asibot.recording.writer import LeanWriter
 
 T0 = 1_795_000_000_123_456_789
 ROBOT, BASE = "asibot-sim", "pioneer-sim"
@@ -222,8 +223,6 @@ def test_bad_input_changes_nothing(tmp_path, monkeypatch):
     # A crash half-way leaves neither a partial file nor a damaged earlier export.
     out = tmp_path / "out.mcap"
     out.write_bytes(b"an earlier export")
-    import asibot.export as export
-
     def crash(key, body):
         raise RuntimeError("disk on fire")
     monkeypatch.setattr(export, "convert", crash)

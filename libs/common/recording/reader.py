@@ -1,4 +1,4 @@
-"""Reading recordings, including files whose writer was killed.
+"""Reading and listing recordings, including files whose writer was killed.
 
 Recovery: a file without its summary (the recorder crashed or was SIGKILLed) cannot be read
 by the seeking reader, which starts at the footer. `iter_messages` therefore streams with
@@ -17,9 +17,7 @@ from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader
 
 from asibot.messages import TYPE_FIELD, decode_any
-
-
-MAGIC = b"\x89MCAP0\r\n"
+from asibot.recording.writer import MAGIC
 
 
 class NotARecording(ValueError):

@@ -35,11 +35,11 @@ import msgpack
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
-from asibot import messages, robots
+from asibot import keys, messages, robots
 from asibot.errors import MessageError
 from asibot.messages import REGISTRY, TYPE_FIELD, decode_any
 from asibot.poses import point_rotation, quaternion_wxyz, yaw_quaternion_wxyz
-from asibot.recordings import Reading, check_recording
+from asibot.recording.reader import Reading, check_recording
 
 TF_TOPIC = "/tf"
 LEVELS = {"debug": 1, "info": 2, "warning": 3, "error": 4, "fatal": 5}
@@ -146,19 +146,14 @@ def _xyzw(q_wxyz: Any) -> dict:
 
 
 def _robot_of(key: str) -> str:
-    parts = key.split("/")
-    return parts[1] if len(parts) > 1 and parts[0] == "rb" else "world"
-
-
-def _camera_of(key: str) -> str:
-    parts = key.split("/")
-    return parts[parts.index("camera") + 1] if "camera" in parts[:-1] else "camera"
+    """The robot whose frames a message is in; keys outside `rb/<robot>/` hang off "world"."""
+    return keys.robot_of(key) or "world"
 
 
 def _camera_frame(key: str) -> str:
     """`<robot>/<camera>_optical`, from the key alone, so the images (which carry no frame)
     and the calibration and transform of their camera always agree."""
-    return f"{_robot_of(key)}/{_camera_of(key)}_optical"
+    return f"{_robot_of(key)}/{keys.camera_of(key) or 'camera'}_optical"
 
 
 def _base_frame(key: str) -> str:
@@ -258,7 +253,7 @@ def _laser_scan(key: str, m: dict) -> Out:
 def _event(key: str, m: dict) -> Out:
     return [(key, "foxglove.Log",
              {"timestamp": _time(m["stamp"]), "level": LEVELS.get(m["level"], 0),
-              "message": f"[{m['code']}] {m['text']}", "name": _robot_of(key) if key.startswith("rb/") else key,
+              "message": f"[{m['code']}] {m['text']}", "name": keys.robot_of(key) or key,
               "file": "", "line": 0})]
 
 

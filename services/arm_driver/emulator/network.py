@@ -1,8 +1,8 @@
 """Five (or any number of) emulated drives on one python-can bus, with fault injection.
 
 One thread reads the bus, routes each frame to the drives it concerns, lets time pass for
-them, and writes their answers back. Absolute encoder boards (asibot.arm_driver.cui) answer
-polls with their joint's real angle. Faults are injected from any thread: over-current (EMCY
+them, and writes their answers back. Absolute encoder boards (`encoder.py`) answer polls
+with their joint's real angle. Faults are injected from any thread: over-current (EMCY
 0x2310), heartbeat loss, a silent (unplugged) drive, a reboot or power cycle, bus-off, and a
 silent or failing encoder board.
 Bus-off is what the master's own controller would report: an error frame with the SocketCAN
@@ -25,16 +25,15 @@ from typing import Iterable
 
 import can
 
-from asibot.arm_driver import cui
 from asibot.arm_driver.config import ArmConfig
-from asibot.arm_driver.emulated_drive import EmulatedDrive
+from asibot.arm_driver.emulator import encoder
+from asibot.arm_driver.emulator.drive import EmulatedDrive
 
-log = logging.getLogger(__name__)
+log = logging.getLogger("asibot.arm_driver.emulator")
 
 CAN_ERR_BUSOFF = 0x00000040      # linux/can/error.h error classes, as python-can delivers them
 CAN_ERR_RESTARTED = 0x00000100
 POLL_S = 0.005
-CUI_STEP_DEG = 360.0 / 4096     # the AMT20 is a 12-bit single-turn encoder
 
 
 def encoders_of(config: ArmConfig) -> dict[int, tuple[int, bool]]:
@@ -186,14 +185,11 @@ class DriveEmulator:
 
     def _encoder(self, can_id: int, data: bytes) -> None:
         """An absolute encoder board answers a poll with its joint's angle, in 12-bit steps."""
-        fault = self._encoder_faults.get(can_id)
-        if data != cui.poll_request() or fault == "silent":
-            return
         node, reverse = self.encoders[can_id]
-        deg = math.degrees(self.drives[node].joint_angle) * (-1 if reverse else 1)
-        deg = round(deg / CUI_STEP_DEG) * CUI_STEP_DEG
-        reply = bytes([0, 0, 0, cui.PIC_ERROR]) if fault == "error" else cui.angle_reply(deg)
-        self._put([(can_id + cui.REPLY_POLL, reply)])
+        frame = encoder.answer(can_id, data, self.drives[node].joint_angle, reverse,
+                               self._encoder_faults.get(can_id))
+        if frame is not None:
+            self._put([frame])
 
     def _send(self, node: int, frames: list[tuple[int, bytes]]) -> None:
         if node in self._silent or self._bus_off_until:

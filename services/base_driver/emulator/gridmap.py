@@ -1,8 +1,9 @@
 """A 2D occupancy grid for the emulator's sonar and bumpers: ROS map_server PGM+YAML, or a room.
 
-map_server convention: `image` (PGM), `resolution` m/cell, `origin` [x, y, yaw] of the
-lower-left pixel, `negate`, `occupied_thresh`; occupancy p = (255 - v) / 255 (or v / 255
-when negated) and a cell is an obstacle when p > occupied_thresh. Row 0 is the top (max y).
+map_server convention (docs/maps.md): `image` (PGM), `resolution` m/cell, `origin` [x, y, yaw]
+of the lower-left pixel, `negate`, `occupied_thresh`; occupancy p = (255 - v) / 255 (or
+v / 255 when negated) and a cell is an obstacle when p > occupied_thresh. Row 0 is the top
+(max y).
 """
 
 from __future__ import annotations
@@ -78,7 +79,7 @@ def room(width: float = 8.0, depth: float = 6.0, resolution: float = 0.05) -> Gr
 
 
 #: Maps shipped with the stack, generated from the simulation's worlds (services/sim/maps).
-SHIPPED_MAPS = Path(__file__).resolve().parent.parent / "sim" / "maps"
+SHIPPED_MAPS = Path(__file__).resolve().parents[2] / "sim" / "maps"   # asibot.sim.maps
 
 
 def resolve(name: str | Path) -> Path:

@@ -23,7 +23,7 @@ Frame = tuple[int, bytes]
 NMT_BOOTUP, NMT_STOPPED, NMT_OPERATIONAL, NMT_PRE_OPERATIONAL = 0x00, 0x04, 0x05, 0x7F
 SDO_RX, SDO_TX, EMCY_BASE, HEARTBEAT_BASE = 0x600, 0x580, 0x080, 0x700
 
-# SDO abort codes (CiA 301 table 22).
+# SDO abort codes (CiA 301 table 22; docs/canopen.md, "SDO abort codes").
 ABORT_COMMAND = 0x05040001
 ABORT_READ_ONLY = 0x06010002
 ABORT_NO_OBJECT = 0x06020000
@@ -43,7 +43,7 @@ MAPPABLE_TX = {objects.MANUFACTURER_STATUS, objects.STATUSWORD, objects.MODES_DI
                objects.POSITION_ACTUAL, objects.VELOCITY_ACTUAL, objects.TORQUE_ACTUAL}
 MAPPABLE_RX = {objects.CONTROLWORD, objects.TARGET_POSITION, objects.MODES}
 
-MER_OVER_CURRENT = 1 << 8     # Motion Error Register 0x2000 bit 8 (reference 4.3)
+MER_OVER_CURRENT = 1 << 8     # Motion Error Register 0x2000 bit 8 (docs/canopen.md, "Error registers")
 MSR_FAULT = 1 << 15           # Manufacturer Status Register bit 15
 
 

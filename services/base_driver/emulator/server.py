@@ -16,7 +16,7 @@ import time
 import tty
 from typing import Callable
 
-from asibot.base_driver.emulated_robot import EmulatedP3at
+from asibot.base_driver.emulator.robot import EmulatedP3at
 
 log = logging.getLogger("asibot.base_driver.emulator")
 

@@ -3,97 +3,28 @@
     python -m asibot.base_driver.emulator --listen 127.0.0.1:8101 [--map apartment.yaml]
         [--start X,Y,THETA] [--pty /tmp/pioneer] [--control 127.0.0.1:8102]
 
-Line faults are injected over the control socket as text lines, one JSON reply each:
-`silent SECONDS`, `garbage COUNT`, `drop COUNT`, `unplug SECONDS`, `status`.
+Line faults are injected over the control socket (`control.py`) as text lines, one JSON
+reply each: `silent SECONDS`, `garbage COUNT`, `drop COUNT`, `unplug SECONDS`, `status`.
 In-process users (tests, benchmarks) take `ArcosEmulator` directly.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import signal
-import socket
 import sys
 import threading
 
-from asibot.base_driver import gridmap
-from asibot.base_driver.emulated_robot import EmulatedP3at, Pose
-from asibot.base_driver.emulator_server import ArcosEmulator
+from asibot.base_driver.emulator import gridmap
+from asibot.base_driver.emulator.control import ControlServer
+from asibot.base_driver.emulator.robot import EmulatedP3at, Pose
+from asibot.base_driver.emulator.server import ArcosEmulator
 from asibot.base_driver.params import KNOWN
-
-__all__ = ["ArcosEmulator", "ControlServer", "main"]
 
 log = logging.getLogger("asibot.base_driver.emulator")
 
 
-# ------------------------------------------------------------------ control socket
-class ControlServer:
-    """Tiny line protocol for the standalone emulator's fault injection."""
-
-    def __init__(self, emulator: ArcosEmulator, listen: tuple[str, int]) -> None:
-        self.emulator = emulator
-        self._server = socket.create_server(listen)
-        self._server.settimeout(0.2)
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._loop, name="emulator-control", daemon=True)
-
-    @property
-    def address(self) -> tuple[str, int]:
-        return self._server.getsockname()[:2]
-
-    def start(self) -> "ControlServer":
-        self._thread.start()
-        return self
-
-    def close(self) -> None:
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout=1.0)
-        self._server.close()
-
-    def _loop(self) -> None:
-        while not self._stop.is_set():
-            try:
-                conn, _ = self._server.accept()
-            except (TimeoutError, OSError):
-                continue
-            with conn, conn.makefile("rw", encoding="utf-8", newline="\n") as f:
-                conn.settimeout(5.0)
-                try:
-                    for line in f:
-                        f.write(json.dumps(self.handle(line)) + "\n")
-                        f.flush()
-                except OSError:
-                    pass
-
-    def handle(self, line: str) -> dict:
-        words = line.split()
-        if not words:
-            return {"ok": False, "message": "empty command; try: status, silent S, garbage N, drop N, unplug S"}
-        verb, rest = words[0].lower(), words[1:]
-        e = self.emulator
-        try:
-            if verb == "status":
-                return {"ok": True, **e.status()}
-            if len(rest) != 1:
-                raise ValueError
-            value = float(rest[0])
-            if not value >= 0 or value > 3600:
-                raise ValueError
-        except ValueError:
-            return {"ok": False, "message": f"bad command {line.strip()!r}; use: status, silent SECONDS, "
-                                            "garbage COUNT, drop COUNT, unplug SECONDS (0..3600)"}
-        actions = {"silent": lambda: e.go_silent(value), "garbage": lambda: e.inject_garbage(int(value)),
-                   "drop": lambda: e.drop_bytes(int(value)), "unplug": lambda: e.pull_cable(value)}
-        if verb not in actions:
-            return {"ok": False, "message": f"unknown command {verb!r}; use status, silent, garbage, drop or unplug"}
-        actions[verb]()
-        return {"ok": True}
-
-
-# ------------------------------------------------------------------ command line
 def _hostport(text: str) -> tuple[str, int]:
     host, _, port = text.rpartition(":")
     if not host or not port.isdigit():
@@ -144,7 +75,3 @@ def main(argv: list[str] | None = None) -> int:
         control.close()
     emulator.close()
     return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

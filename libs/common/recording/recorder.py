@@ -2,10 +2,10 @@
 
 MCAP with message encoding `msgpack` (self-describing, so schema id 0) and zstd chunks.
 The current chunk is closed and flushed at least every second, so a killed recorder loses at
-most the last second; `asibot.recordings.iter_messages` reads such a file up to its last
+most the last second; `asibot.recording.reader.iter_messages` reads such a file up to its last
 complete chunk.
 
-    python -m asibot.recorder [--dir recordings] [--exclude 'rb/*/camera/**']
+    python -m asibot.recording [--dir recordings] [--exclude 'rb/*/camera/**']
 """
 
 from __future__ import annotations
@@ -16,16 +16,16 @@ import fnmatch
 import logging
 import os
 import threading
-import time
 from pathlib import Path
 from typing import BinaryIO
 
 
-from asibot import keys
-from asibot.mcap_writer import LeanWriter
+from asibot import keys, runtime
+from asibot.recording.writer import LeanWriter
 
 log = logging.getLogger("asibot.recorder")
 
+NAME = "recorder"
 PROFILE = "asibot"
 ENCODING = "msgpack"
 
@@ -98,7 +98,7 @@ class McapRecorder:
             self._file.close()
 
 
-class RecorderService:
+class RecorderService(runtime.Service):
     """Subscribes to every key and hands each sample to an McapRecorder."""
 
     def __init__(self, bus, directory: Path, label: str = "", exclude: list[str] | None = None) -> None:
@@ -135,11 +135,3 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def build(bus, args) -> RecorderService:
     return RecorderService(bus, Path(args.dir), args.label, args.exclude)
 
-
-def main(argv: list[str] | None = None) -> int:
-    from asibot import runtime
-    return runtime.run("recorder", build, add_arguments, argv)
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -1,0 +1,206 @@
+"""The Zenoh backend of the bus: the only module of the stack that talks to Zenoh.
+
+Why a wrapper at all: zenoh-python forbids blocking in its callbacks and needs every Query
+finalised, and every service needs the same client configuration (one router, no multicast,
+retry until the router exists). Doing that once here keeps services free of Zenoh details.
+Samples and queries wait in Zenoh channels (Rust-side queues) that `Drain` threads pull:
+no Python callback runs on Zenoh's threads, which also doubles throughput.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import threading
+import time
+from typing import Any, Callable
+
+import zenoh
+
+from asibot.bus.base import Answer, Bus, Drain, Prelude
+from asibot.errors import Unavailable
+
+log = logging.getLogger("asibot.bus")
+
+ROUTER_ENV = "ASIBOT_ROUTER"
+DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
+
+def router_endpoint(explicit: str | None = None) -> str:
+    """The router endpoint: an explicit value, else $ASIBOT_ROUTER, else the loopback default."""
+    return explicit or os.environ.get(ROUTER_ENV) or DEFAULT_ROUTER
+
+
+def _base_config(mode: str) -> zenoh.Config:
+    cfg = zenoh.Config()
+    cfg.insert_json5("mode", json.dumps(mode))
+    # Loopback-only machines and predictable deployments: never scout by multicast.
+    cfg.insert_json5("scouting/multicast/enabled", "false")
+    cfg.insert_json5("scouting/gossip/enabled", "false")
+    return cfg
+
+
+def client_config(endpoint: str, connect_timeout_ms: int = 1000) -> zenoh.Config:
+    cfg = _base_config("client")
+    cfg.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    # Explicit, because 1.10.2 clients still fail at once by default (docs/foundation-api.md, Bus).
+    cfg.insert_json5("connect/timeout_ms", json.dumps(connect_timeout_ms))
+    cfg.insert_json5("connect/exit_on_failure", "true")
+    return cfg
+
+
+def router_config(endpoint: str) -> zenoh.Config:
+    cfg = _base_config("router")
+    cfg.insert_json5("listen/endpoints", json.dumps([endpoint]))
+    return cfg
+
+
+def open_client(endpoint: str, *, wait: float | None = None,
+                stop: threading.Event | None = None) -> zenoh.Session:
+    """Open a client session, retrying every second until the router answers.
+
+    Retrying in Python (instead of Zenoh's endless connect) keeps the process responsive
+    to SIGTERM while it waits. `wait=None` waits forever; `stop` aborts the wait.
+    """
+    deadline = None if wait is None else time.monotonic() + wait
+    announced = False
+    while True:
+        try:
+            return zenoh.open(client_config(endpoint))
+        except zenoh.ZError as exc:
+            if deadline is not None and time.monotonic() >= deadline:
+                raise Unavailable(
+                    f"No Zenoh router answers at {endpoint}. Start it with `asibot router` "
+                    f"or `asibot up`, or set {ROUTER_ENV}."
+                ) from exc
+            if not announced:
+                log.warning("waiting for the router at %s ...", endpoint)
+                announced = True
+            if stop is not None and stop.wait(0.5):
+                raise Unavailable("stopped while waiting for the router") from exc
+            if stop is None:
+                time.sleep(0.5)
+
+
+class _Publisher:
+    def __init__(self, pub: zenoh.Publisher) -> None:
+        self._pub = pub
+
+    def put(self, payload: bytes | bytearray) -> None:
+        self._pub.put(payload)
+
+    def matching(self) -> bool:
+        return self._pub.matching_status.matching
+
+    def close(self) -> None:
+        self._pub.undeclare()
+
+
+class _Token:
+    def __init__(self, token: Any) -> None:
+        self._token = token
+
+    def close(self) -> None:
+        self._token.undeclare()
+
+
+def _drain(name: str, declared: Any, handle: Callable[[Any], None], workers: int = 1,
+           prelude: Prelude | None = None) -> Drain:
+    # Receive from the handler, not the subscriber: a blocked `Subscriber.recv()` holds a
+    # borrow that makes `undeclare()` fail, while undeclaring closes the handler's channel
+    # and wakes a blocked `handler.recv()` at once, so close() is immediate.
+    return Drain(name, declared.handler.recv, handle, declared.undeclare, workers, prelude)
+
+
+class ZenohBus(Bus):
+    """The bus over a Zenoh router, in client mode (`tcp/127.0.0.1:7447` by default)."""
+
+    def __init__(self, name: str, endpoint: str | None = None, *, wait: float | None = None,
+                 stop: threading.Event | None = None) -> None:
+        super().__init__(name, router_endpoint(endpoint))
+        self.session = open_client(self.endpoint, wait=wait, stop=stop)
+
+    def _declare_publisher(self, key: str, express: bool, block: bool) -> _Publisher:
+        cc = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
+        return _Publisher(self.session.declare_publisher(key, express=express, congestion_control=cc))
+
+    def _declare_subscriber(self, key: str, deliver: Callable[[str, bytes], None], maxsize: int,
+                            ring: bool, prelude: Prelude | None = None) -> Drain:
+        size = maxsize or 1024
+        channel = zenoh.handlers.RingChannel(size) if ring else zenoh.handlers.FifoChannel(size)
+
+        def handle(item: Any) -> None:
+            if isinstance(item, tuple):  # from the prelude
+                deliver(*item)
+            else:
+                deliver(str(item.key_expr), item.payload.to_bytes())
+
+        return _drain(f"{self.name}-sub", self.session.declare_subscriber(key, channel), handle,
+                      prelude=prelude)
+
+    def _declare_queryable(self, key: str, answer: Answer, workers: int) -> Drain:
+        def run(query: zenoh.Query) -> None:
+            try:
+                raw = query.payload.to_bytes() if query.payload is not None else b""
+                result = answer(str(query.key_expr), raw)
+                if result is not None:
+                    query.reply(result[0], result[1], express=True)
+            finally:
+                query.drop()  # finalise: otherwise the caller waits for its full timeout
+
+        queryable = self.session.declare_queryable(key, zenoh.handlers.FifoChannel(256))
+        return _drain(f"{self.name}-rpc", queryable, run, workers)
+
+    def _get(self, key: str, payload: bytes, timeout: float) -> list[tuple[str, bytes] | None]:
+        # No consolidation: several latches on one key must all answer so the newest wins.
+        replies = self.session.get(key, payload=payload, timeout=timeout,
+                                   consolidation=zenoh.ConsolidationMode.NONE, express=True)
+        return [(str(r.ok.key_expr), r.ok.payload.to_bytes()) if r.ok is not None else None
+                for r in replies]
+
+    def _put(self, key: str, payload: bytes) -> None:
+        self.session.put(key, payload)
+
+    def _wait_for_queryable(self, key: str, timeout: float) -> bool:
+        querier = self.session.declare_querier(key)
+        try:
+            deadline = time.monotonic() + timeout
+            while not querier.matching_status.matching:
+                if time.monotonic() > deadline:
+                    return False
+                time.sleep(0.005)
+            return True
+        finally:
+            querier.undeclare()
+
+    def _declare_token(self, key: str) -> _Token:
+        return _Token(self.session.liveliness().declare_token(key))
+
+    def _watch_tokens(self, pattern: str, on_change: Callable[[str, bool], None]) -> Drain:
+        sub = self.session.liveliness().declare_subscriber(
+            pattern, zenoh.handlers.FifoChannel(1024), history=True)
+        return _drain(f"{self.name}-watch", sub,
+                      lambda s: on_change(str(s.key_expr), s.kind == zenoh.SampleKind.PUT))
+
+    def _tokens(self, pattern: str, timeout: float) -> list[str]:
+        replies = self.session.liveliness().get(pattern, timeout=timeout)
+        return [str(r.ok.key_expr) for r in replies if r.ok is not None]
+
+    def _close_transport(self) -> None:
+        self.session.close()
+
+
+def run_router(endpoint: str | None = None, stop: threading.Event | None = None) -> None:
+    """Run a Zenoh router in this process until `stop` is set (or forever)."""
+    ep = router_endpoint(endpoint)
+    session = zenoh.open(router_config(ep))
+    log.info("router listening on %s", ep)
+    try:
+        (stop or threading.Event()).wait()
+    finally:
+        session.close()
+
+
+def open_router(endpoint: str) -> zenoh.Session:
+    """Open (and return) an in-process router session, for tests and `asibot up`."""
+    return zenoh.open(router_config(endpoint))

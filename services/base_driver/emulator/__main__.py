@@ -1,0 +1,4 @@
+from asibot.base_driver.emulator.cli import main
+
+if __name__ == "__main__":
+    raise SystemExit(main())
