@@ -47,7 +47,7 @@ class Inbox:
 
 
 @pytest.fixture
-def world(router, emulator):
+def world(memory_bus, emulator):
     svc_bus = Bus("base_driver")
     svc = BaseDriverService(svc_bus, ROBOT, emulator.url)
     user = Bus("test")
@@ -103,7 +103,7 @@ def test_latched_estop_stops_and_status_reports_it(world):
     assert user.call(keys.driver_rpc(ROBOT, "reset_fault"), {}, timeout=2.0)["ok"]
 
 
-def test_late_driver_learns_a_latched_estop(router, emulator):
+def test_late_driver_learns_a_latched_estop(memory_bus, emulator):
     user = Bus("test")
     user.latch(keys.estop(ROBOT), EStop(engaged=True, reason="latched before start"))
     svc_bus = Bus("base_driver")

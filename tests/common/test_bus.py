@@ -2,6 +2,7 @@
 
 import subprocess
 import sys
+import threading
 import time
 
 import msgpack
@@ -168,3 +169,33 @@ def test_a_service_waits_for_a_router_that_starts_later(monkeypatch):
 def test_rpc_requires_a_timeout(bus):
     with pytest.raises(ValueError):
         bus.call(keys.cart_rpc("x", "stat"), timeout=0)
+
+
+FORGETFUL = """
+import time
+from asibot.bus import Bus
+from asibot import keys, messages as m
+bus = Bus("forgetful")
+got = []
+bus.subscribe(keys.arm_state("r6"), m.ArmState, got.append)
+while not got:
+    time.sleep(0.01)
+print("exiting without close()", flush=True)
+"""
+
+
+def test_a_program_that_forgets_close_exits_cleanly_mid_stream(bus):
+    pub = bus.publisher(keys.arm_state("r6"), m.ArmState)
+    stop = threading.Event()
+
+    def stream():
+        while not stop.is_set():
+            pub.put(m.ArmState(names=["q1"], positions=[1.0], velocities=[0.0]))
+            time.sleep(0.0005)
+    threading.Thread(target=stream, daemon=True).start()
+    try:
+        for _ in range(3):  # it failed every time before the fix; three runs make a pass mean something
+            r = subprocess.run([sys.executable, "-c", FORGETFUL], capture_output=True, text=True, timeout=30)
+            assert r.returncode == 0 and "exiting" in r.stdout, r.stderr[-500:]
+    finally:
+        stop.set()

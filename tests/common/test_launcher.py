@@ -132,9 +132,11 @@ def test_supervisor_restarts_with_backoff_and_stops_everything(tmp_path):
 
 @pytest.mark.slow
 def test_asibot_up_status_and_ctrl_c(tmp_path):
-    """The user's path: `asibot up`, `asibot status` lists router and recorder, Ctrl-C, a recording."""
+    """The user's path: `asibot up`, `asibot status` lists router and recorder, Ctrl-C, a recording
+    in the folder ASIBOT_RECORDINGS names (which `asibot recordings` lists too)."""
     shutil.copy(COMPOSE, tmp_path / "compose.yaml")
-    env = dict(os.environ, ASIBOT_ROUTER=f"tcp/127.0.0.1:{free_port()}")
+    elsewhere = tmp_path / "elsewhere"
+    env = dict(os.environ, ASIBOT_ROUTER=f"tcp/127.0.0.1:{free_port()}", ASIBOT_RECORDINGS=str(elsewhere))
     up = subprocess.Popen([sys.executable, "-m", "asibot.cli", "up", "--only", "recorder"],
                           cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     lines: list[str] = []
@@ -152,8 +154,8 @@ def test_asibot_up_status_and_ctrl_c(tmp_path):
         assert up.wait(10) == 0
     text = "".join(lines)
     assert "recorder | " in text and "asibot   | stopped" in text
-    recordings = list((tmp_path / "recordings").glob("*.mcap"))
-    assert len(recordings) == 1
+    recordings = list(elsewhere.glob("*.mcap"))
+    assert len(recordings) == 1 and not (tmp_path / "recordings").exists()
     listing = subprocess.run([sys.executable, "-m", "asibot.cli", "recordings"], cwd=tmp_path,
                              capture_output=True, text=True, env=env).stdout
     assert recordings[0].name in listing

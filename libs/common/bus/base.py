@@ -10,9 +10,11 @@ anything else is a Zenoh router.
 from __future__ import annotations
 
 import abc
+import atexit
 import logging
 import threading
 import time
+import weakref
 from typing import Any, Callable, Generic, Protocol, TypeVar
 
 from asibot import keys, messages
@@ -33,6 +35,18 @@ MEMORY_SCHEME = "mem://"
 Answer = Callable[[str, bytes], "tuple[str, bytes] | None"]
 #: Items a subscriber delivers before its first sample (the latched values).
 Prelude = Callable[[], "list[tuple[str, bytes]]"]
+
+
+#: Every bus not closed yet: closed at exit, so a program that forgets close() still ends
+#: cleanly. (Otherwise a drain thread inside Zenoh's recv when the interpreter finalises is
+#: torn down through Rust frames: "FATAL: exception not rethrown", exit 134.)
+_open_buses: "weakref.WeakSet[Bus]" = weakref.WeakSet()
+
+
+@atexit.register
+def _close_forgotten_buses() -> None:
+    for bus in list(_open_buses):
+        bus.close()
 
 
 class Closable(Protocol):
@@ -101,6 +115,7 @@ class Bus(abc.ABC):
         self._lock = threading.Lock()
         self._latched: dict[str, bytes] = {}
         self._closed = False
+        _open_buses.add(self)
 
     # ------------------------------------------------------------ what a backend provides
     @abc.abstractmethod
