@@ -1,6 +1,10 @@
-"""Shared fixtures: every multi-process test gets its own real Zenoh router on loopback."""
+"""Shared fixtures: every multi-process test gets its own real Zenoh router on loopback;
+service unit tests get an in-memory bus. `pytest --cpu-burners 2` runs the suite with both
+cores of a 2-core machine kept busy, as a loaded CI machine would be."""
 
 import os
+import subprocess
+import sys
 
 import pytest
 
@@ -21,3 +25,19 @@ def router():
     """A real Zenoh router on a free loopback port; ASIBOT_ROUTER points at it."""
     with testing.router() as endpoint:
         yield endpoint
+
+
+def pytest_addoption(parser):
+    parser.addoption("--cpu-burners", type=int, default=int(os.environ.get("ASIBOT_CPU_BURNERS", "0")),
+                     help="keep N busy processes running during the tests (stress: a loaded machine)")
+
+
+@pytest.fixture(scope="session", autouse=True)
+def cpu_burners(request):
+    """N processes spinning for the whole session, when asked for (--cpu-burners N)."""
+    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"])
+             for _ in range(request.config.getoption("--cpu-burners"))]
+    yield len(procs)
+    for p in procs:
+        p.kill()
+        p.wait()

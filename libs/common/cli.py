@@ -168,11 +168,12 @@ def cmd_release(args: argparse.Namespace) -> int:
     return 1
 
 
-def cmd_reset_fault(args: argparse.Namespace) -> int:
-    with Bus("reset-fault", wait=args.wait) as bus:
-        reply = bus.call(keys.driver_rpc(args.robot, "reset_fault"), timeout=10.0)
+def cmd_driver_verb(args: argparse.Namespace) -> int:
+    """`reset-fault` and `reset-world`: one driver RPC, its sentence on refusal."""
+    with Bus(args.command, wait=args.wait) as bus:
+        reply = bus.call(keys.driver_rpc(args.robot, args.verb), timeout=10.0)
     reply.pop("ok", None)
-    print(f"{args.robot}: fault cleared" + (f" {reply}" if reply else ""))
+    print(f"{args.robot}: {args.done}" + (f" {reply}" if reply else ""))
     return 0
 
 
@@ -338,10 +339,14 @@ def build_parser() -> argparse.ArgumentParser:
     rl.add_argument("robot")
     rl.add_argument("--wait", type=float, default=2.0, help="seconds to wait for the router")
     rl.set_defaults(func=cmd_release)
-    rf = sub.add_parser("reset-fault", help="ask a robot's driver to clear its fault")
-    rf.add_argument("robot")
-    rf.add_argument("--wait", type=float, default=2.0, help="seconds to wait for the router")
-    rf.set_defaults(func=cmd_reset_fault)
+    for name, verb, done, text in (
+            ("reset-fault", "reset_fault", "fault cleared", "ask a robot's driver to clear its fault"),
+            ("reset-world", "reset_world", "world reset: objects and arm where they started, odometry at zero",
+             "simulated robots only: put the world back as it started (the red can too)")):
+        rf = sub.add_parser(name, help=text)
+        rf.add_argument("robot")
+        rf.add_argument("--wait", type=float, default=2.0, help="seconds to wait for the router")
+        rf.set_defaults(func=cmd_driver_verb, verb=verb, done=done)
 
     rc = sub.add_parser("recordings", help="list recordings with duration, topics and counts")
     rc.add_argument("dir", nargs="?", default=os.environ.get("ASIBOT_RECORDINGS", "recordings"))

@@ -57,6 +57,17 @@ def memory_bus(name: str) -> Iterator[str]:
         yield endpoint
 
 
+def scheduling_delay(samples: int = 20, period: float = 0.005) -> float:
+    """How late this machine wakes a sleeping thread right now (the worst of `samples` short
+    sleeps), s. Timing checks allow for it instead of assuming an idle machine."""
+    worst = 0.0
+    for _ in range(samples):
+        t = time.monotonic()
+        time.sleep(period)
+        worst = max(worst, time.monotonic() - t - period)
+    return worst
+
+
 def wait_until(predicate: Callable[[], object], timeout: float = 5.0, interval: float = 0.01,
                message: str = "") -> object:
     """Poll until predicate() is truthy; return its value or raise AssertionError on timeout."""

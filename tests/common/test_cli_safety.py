@@ -72,3 +72,11 @@ def test_reset_fault_passes_the_driver_sentence(router):
     finally:
         ok.bus.close()
         stuck.bus.close()
+
+
+def test_reset_world_reaches_the_simulated_robot(router):
+    calls = []
+    with Bus("sim") as sim:
+        sim.serve(keys.driver_rpc("sim-9", "reset_world"), lambda req: calls.append(req) or {})
+        r = asibot("reset-world", "sim-9")
+        assert r.returncode == 0 and "world reset" in r.stdout and calls == [{}]
