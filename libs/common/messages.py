@@ -1,7 +1,8 @@
 """Message schemas: one dataclass per message type, encoded as a MessagePack map.
 
 Every message has `stamp` (ns, producer clock). numpy arrays travel as a msgpack ext type
-(dtype, shape, raw bytes) so a depth image costs one copy, not a list of floats. Decoding
+(dtype, shape, raw bytes), not as lists of floats: encoding copies an array's buffer once, into
+the message, and decoding copies it once too (msgpack's ext data), into a read-only array. Decoding
 checks every field against the dataclass annotation and raises MessageError naming the field,
 so a receiver can reject bad input, count it and keep running.
 """
@@ -40,22 +41,22 @@ def now_ns() -> int:
 #
 # - encoding builds a map that holds arrays (or large bytes) from small msgpack-packed pieces
 #   and hand-written ext/bin headers, and copies each array's buffer once, straight into the
-#   message (b"".join), instead of tobytes() + ExtType + packb (three copies of the array);
-# - decoding a large map walks its top level by hand and makes each array a view onto the
-#   payload (np.frombuffer), instead of letting msgpack copy the ext data and then feeding
-#   it to an Unpacker (two copies). Small payloads take msgpack's C path, which is faster.
+#   message (b"".join), instead of tobytes(), head + bytes, packb's buffer and packb's result
+#   (four copies, three alive at once);
+# - decoding makes each array a read-only view (np.frombuffer) onto the ext data msgpack
+#   hands its ext_hook, instead of copying it again through an Unpacker (one copy, not two).
 #
 # The bytes are the same either way: tests/common/test_messages_arrays.py compares them with
 # msgpack.packb and an ExtType.
 
 #: Values of a top-level map from this size are spliced into the message, not re-packed.
 _SPLICE_MIN = 16 * 1024
-#: Payloads from this size are decoded by the top-level walker, arrays as views.
-_ZERO_COPY_MIN = 16 * 1024
-#: Objects the walker skips by hand before it leaves the payload to msgpack (long lists).
-_SKIP_BUDGET = 4096
 #: Longest [dtype, shape] head of an array (a 64-dimension shape of uint64 takes ~600 bytes).
 _HEAD_MAX = 1024
+#: First buffer of our Packers. msgpack.packb's starts at 256 KiB, and allocating and freeing
+#: that on every call costs more than packing a small message (0.66 us vs 0.28 for a Battery),
+#: ~13 us when a nested packb (an array's head) makes glibc map and unmap it each time.
+_PACK_BUF = 4096
 
 _U8, _U16, _U32 = struct.Struct(">BB"), struct.Struct(">BH"), struct.Struct(">BI")
 _EXT8, _EXT16, _EXT32 = struct.Struct(">BBb"), struct.Struct(">BHb"), struct.Struct(">BIb")
@@ -91,12 +92,18 @@ def _ext_header(code: int, n: int) -> bytes:
     raise ValueError("an array of 4 GiB or more cannot travel in one message")
 
 
-def _array_parts(obj: np.ndarray) -> tuple[bytes, bytes, Any]:
-    """Ext header, [dtype, shape] head and a zero-copy view of the bytes of one array."""
-    arr = np.ascontiguousarray(obj)  # no copy when already C-contiguous; 0-d becomes shape (1,)
+def _contiguous(obj: np.ndarray) -> tuple[np.ndarray, bytes]:
+    """The array in C order (no copy when it already is; 0-d becomes shape (1,)) and its
+    [dtype, shape] head."""
+    arr = np.ascontiguousarray(obj)
     if arr.dtype.hasobject:
         raise TypeError("numpy object arrays cannot travel on the bus")
-    head = msgpack.packb([arr.dtype.str, list(arr.shape)])
+    return arr, msgpack.Packer(buf_size=_HEAD_MAX).pack([arr.dtype.str, list(arr.shape)])
+
+
+def _array_parts(obj: np.ndarray) -> tuple[bytes, bytes, Any]:
+    """Ext header, [dtype, shape] head and a zero-copy view of the bytes of one array."""
+    arr, head = _contiguous(obj)
     try:
         raw: Any = arr.reshape(-1).view(np.uint8)  # a view: b"".join copies it once
     except ValueError:  # dtypes that cannot be viewed as bytes (zero itemsize)
@@ -107,8 +114,8 @@ def _array_parts(obj: np.ndarray) -> tuple[bytes, bytes, Any]:
 def _default(obj: Any) -> Any:
     """msgpack's fallback for arrays nested below the top level, numpy scalars and tuples."""
     if isinstance(obj, np.ndarray):
-        header, head, raw = _array_parts(obj)
-        return msgpack.ExtType(NDARRAY_EXT, head + bytes(raw))
+        arr, head = _contiguous(obj)  # small arrays (large ones are spliced): copies are cheap
+        return msgpack.ExtType(NDARRAY_EXT, head + arr.tobytes())
     if isinstance(obj, np.generic):
         return obj.item()
     if isinstance(obj, tuple):
@@ -116,29 +123,40 @@ def _default(obj: Any) -> Any:
     raise TypeError(f"cannot encode {type(obj).__name__} in a message")
 
 
+_BULKY = (np.ndarray, bytes, bytearray)
+
+
 def _spliced(value: Any) -> bool:
-    return isinstance(value, np.ndarray) or (
-        isinstance(value, (bytes, bytearray)) and len(value) >= _SPLICE_MIN)
+    """Whether a map value is big enough to be worth copying once by hand."""
+    if isinstance(value, np.ndarray):
+        return value.nbytes >= _SPLICE_MIN
+    return isinstance(value, (bytes, bytearray)) and len(value) >= _SPLICE_MIN
 
 
 def _pack_map_spliced(d: dict) -> bytes:
-    """Pack a map piece by piece; arrays and large bytes are copied once, by the final join."""
+    """Pack a map piece by piece: msgpack packs the small values, each large array or bytes
+    value gets a hand-written header and is copied once, by the final join."""
+    packer = msgpack.Packer(default=_default, use_bin_type=True, autoreset=False, buf_size=_PACK_BUF)
     parts: list[Any] = [_map_header(len(d))]
     for key, value in d.items():
-        parts.append(msgpack.packb(key, default=_default, use_bin_type=True))
+        packer.pack(key)
+        if not _spliced(value):
+            packer.pack(value)
+            continue
+        parts.append(packer.bytes())
+        packer.reset()
         if isinstance(value, np.ndarray):
             parts.extend(_array_parts(value))
-        elif isinstance(value, (bytes, bytearray)) and len(value) >= _SPLICE_MIN:
+        else:
             parts.append(_bin_header(len(value)))
             parts.append(value)
-        else:
-            parts.append(msgpack.packb(value, default=_default, use_bin_type=True))
+    parts.append(packer.bytes())
     return b"".join(parts)
 
 
 def _array(buf: Any, start: int, end: int) -> np.ndarray:
-    """The array whose ext data is buf[start:end]: a read-only view onto `buf` when the data
-    is aligned for its dtype, else a read-only aligned copy. Raises _BadArray."""
+    """The array whose ext data is buf[start:end], as a read-only view onto `buf` (no copy;
+    it may be unaligned for its dtype). Raises _BadArray."""
     unpacker = msgpack.Unpacker(raw=False, max_buffer_size=_HEAD_MAX)
     try:
         unpacker.feed(buf[start:min(end, start + _HEAD_MAX)])
@@ -154,8 +172,7 @@ def _array(buf: Any, start: int, end: int) -> np.ndarray:
         raise _BadArray(f"unknown dtype {dtype!r:.60}") from None
     if dt.hasobject:
         raise _BadArray("object arrays are not allowed")
-    if not isinstance(shape, list) or not all(
-            isinstance(n, int) and not isinstance(n, bool) and n >= 0 for n in shape):
+    if type(shape) is not list or any(type(n) is not int or n < 0 for n in shape):
         raise _BadArray(f"shape must be a list of sizes, got {shape!r:.60}")
     count = math.prod(shape)
     if count * dt.itemsize != end - offset:
@@ -164,9 +181,8 @@ def _array(buf: Any, start: int, end: int) -> np.ndarray:
         arr = np.zeros(shape, dt)
     else:
         arr = np.frombuffer(buf, dtype=dt, count=count, offset=offset).reshape(shape)
-        if not arr.flags.aligned:
-            arr = arr.copy()  # unaligned data makes many numpy loops slower (count_nonzero 6x)
-    arr.flags.writeable = False
+    if arr.flags.writeable:  # a view onto bytes already is read-only; onto a bytearray, not
+        arr.flags.writeable = False
     return arr
 
 
@@ -176,165 +192,35 @@ def _ext_hook(code: int, data: bytes) -> Any:
     return _array(data, 0, len(data))
 
 
-class _NotHere(Exception):
-    """The walker leaves this payload to msgpack (not a map, odd keys, garbage, long lists)."""
-
-
-# For a type byte 0xc0-0xdf: (header size, length bytes, ext type byte, children per count).
-# A length-prefixed object is header + length; a container adds count * children objects.
-_FORMS: dict[int, tuple[int, int, int, int]] = {
-    0xC0: (1, 0, 0, 0), 0xC2: (1, 0, 0, 0), 0xC3: (1, 0, 0, 0),
-    0xC4: (2, 1, 0, 0), 0xC5: (3, 2, 0, 0), 0xC6: (5, 4, 0, 0),           # bin
-    0xC7: (3, 1, 1, 0), 0xC8: (4, 2, 1, 0), 0xC9: (6, 4, 1, 0),           # ext
-    0xCA: (5, 0, 0, 0), 0xCB: (9, 0, 0, 0),                               # float
-    0xCC: (2, 0, 0, 0), 0xCD: (3, 0, 0, 0), 0xCE: (5, 0, 0, 0), 0xCF: (9, 0, 0, 0),
-    0xD0: (2, 0, 0, 0), 0xD1: (3, 0, 0, 0), 0xD2: (5, 0, 0, 0), 0xD3: (9, 0, 0, 0),
-    0xD4: (3, 0, 0, 0), 0xD5: (4, 0, 0, 0), 0xD6: (6, 0, 0, 0), 0xD7: (10, 0, 0, 0),
-    0xD8: (18, 0, 0, 0),                                                  # fixext
-    0xD9: (2, 1, 0, 0), 0xDA: (3, 2, 0, 0), 0xDB: (5, 4, 0, 0),           # str
-    0xDC: (3, 2, 0, 1), 0xDD: (5, 4, 0, 1), 0xDE: (3, 2, 0, 2), 0xDF: (5, 4, 0, 2),
-}
-
-
-def _length(buf: Any, pos: int, size: int) -> int:
-    if size == 1:
-        return buf[pos]
-    return int.from_bytes(buf[pos:pos + size], "big")
-
-
-def _skip(buf: Any, pos: int, budget: list[int]) -> int:
-    """Offset just past the msgpack object at `pos`, stepping over its children."""
-    todo = 1
-    while todo:
-        todo -= 1
-        budget[0] -= 1
-        if budget[0] < 0:
-            raise _NotHere
-        b = buf[pos]
-        if b < 0x80 or b >= 0xE0:       # fixint
-            pos += 1
-        elif b < 0x90:                   # fixmap
-            todo += 2 * (b & 0x0F)
-            pos += 1
-        elif b < 0xA0:                   # fixarray
-            todo += b & 0x0F
-            pos += 1
-        elif b < 0xC0:                   # fixstr
-            pos += 1 + (b & 0x1F)
-        else:
-            form = _FORMS.get(b)
-            if form is None:
-                raise _NotHere
-            size, lsize, _, children = form
-            if children:
-                todo += children * _length(buf, pos + 1, lsize)
-                pos += size
-            elif lsize:
-                pos += size + _length(buf, pos + 1, lsize)
-            else:
-                pos += size
-    if pos > len(buf):
-        raise _NotHere
-    return pos
-
-
-def _ext_at(buf: Any, pos: int) -> tuple[int, int, int] | None:
-    """(code, data start, data end) when the object at `pos` is an ext, else None."""
-    b = buf[pos]
-    if 0xD4 <= b <= 0xD8:
-        size = 1 << (b - 0xD4)
-        start = pos + 2
-    elif 0xC7 <= b <= 0xC9:
-        lsize = 1 << (b - 0xC7)
-        size = _length(buf, pos + 1, lsize)
-        start = pos + 2 + lsize
-    else:
-        return None
-    code = buf[start - 1]
-    end = start + size
-    if end > len(buf):
-        raise _NotHere
-    return (code - 256 if code > 127 else code), start, end
-
-
-def _unpack_map(data: Any, budget: int | None = _SKIP_BUDGET) -> dict | None:
-    """Decode a top-level map by hand, its arrays as views onto `data` (no copy).
-
-    None when the payload is not for this walker (msgpack then decodes it, or says what is
-    wrong with it); MessageError naming the key when a value holds a bad array.
-    """
-    buf = memoryview(data).cast("B") if not isinstance(data, (bytes, bytearray)) else memoryview(data)
-    left = [budget if budget is not None else len(buf) + 1]
-    try:
-        b = buf[0]
-        if 0x80 <= b <= 0x8F:
-            n, pos = b & 0x0F, 1
-        elif b in (0xDE, 0xDF):
-            lsize = 2 if b == 0xDE else 4
-            n, pos = _length(buf, 1, lsize), 1 + lsize
-        else:
-            return None
-        out: dict = {}
-        for _ in range(n):
-            b = buf[pos]
-            if 0xA0 <= b <= 0xBF:
-                start, end = pos + 1, pos + 1 + (b & 0x1F)
-            elif 0xD9 <= b <= 0xDB:
-                lsize = 1 << (b - 0xD9)
-                start = pos + 1 + lsize
-                end = start + _length(buf, pos + 1, lsize)
-            else:
-                return None  # keys that are not strings: msgpack's rules apply
-            if end > len(buf):
-                return None
-            key = str(buf[start:end], "utf-8")
-            pos = end
-            try:
-                ext = _ext_at(buf, pos)
-                if ext is not None:
-                    code, start, pos = ext
-                    out[key] = _array(buf, start, pos) if code == NDARRAY_EXT else \
-                        msgpack.ExtType(code, bytes(buf[start:pos]))
-                    continue
-                end = _skip(buf, pos, left)
-                out[key] = msgpack.unpackb(buf[pos:end], ext_hook=_ext_hook, raw=False,
-                                           strict_map_key=False)
-                pos = end
-            except _BadArray as exc:
-                raise MessageError("payload", key, f"not a valid array: {exc}") from None
-        return out if pos == len(buf) else None
-    except MessageError:
-        raise
-    except Exception:  # truncated, invalid bytes, too many objects to skip by hand
-        return None
-
-
 def pack(obj: Any) -> bytes:
     """Encode any msgpack-able value (dicts for RPC, messages' maps) with numpy support.
 
     A map whose values include arrays or large bytes is assembled from pieces, each array's
     buffer copied once, into bytes equal to msgpack.packb's.
     """
-    if isinstance(obj, dict) and any(_spliced(v) for v in obj.values()):
-        return _pack_map_spliced(obj)
-    return msgpack.packb(obj, default=_default, use_bin_type=True)
+    if isinstance(obj, dict):
+        for v in obj.values():
+            if isinstance(v, _BULKY) and _spliced(v):
+                return _pack_map_spliced(obj)
+    return _packer().pack(obj)
+
+
+def _packer() -> msgpack.Packer:
+    """What msgpack.packb(obj, default=_default, use_bin_type=True) uses, with a small buffer."""
+    return msgpack.Packer(default=_default, use_bin_type=True, buf_size=_PACK_BUF)
 
 
 def unpack(data: bytes) -> Any:
     """Decode bytes produced by `pack`; raises MessageError on garbage.
 
-    Arrays come back read-only. In a large payload (>= 16 KiB) a top-level array is a view
-    onto `data` (it keeps `data` alive; no copy) unless its bytes are misaligned for its
-    dtype, in which case it is one aligned copy. Copy (`arr.copy()`) before writing into one.
+    Arrays come back read-only, as views onto msgpack's copy of their ext data (the one copy
+    msgpack-python allows on decoding). A view may be unaligned for its dtype (a DepthImage's
+    float32 pixels start at an odd offset), which numpy handles, a little slower in some
+    loops. A receiver that writes into an array, or wants it aligned, copies it: `arr.copy()`.
     """
-    if len(data) >= _ZERO_COPY_MIN:
-        found = _unpack_map(data)
-        if found is not None:
-            return found
     try:
         return msgpack.unpackb(data, ext_hook=_ext_hook, raw=False, strict_map_key=False)
     except _BadArray as exc:
-        _unpack_map(data, budget=None)  # names the field when the array is in a top-level value
         raise MessageError("payload", "", f"not a valid array: {exc}") from None
     except Exception as exc:  # msgpack raises several unrelated types
         raise MessageError("payload", "", f"not valid MessagePack ({type(exc).__name__}: {exc})") from None
@@ -420,6 +306,9 @@ def message(cls: type[T]) -> type[T]:
         if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
     )
     cls._checks = {f.name: _checker(hints[f.name], f.name, cls.__name__) for f in fields}  # type: ignore[attr-defined]
+    # Only messages with fields that may hold a large array or bytes look for them in encode()
+    # (the bytes are the same either way; this only spares small messages the search).
+    cls._bulky = any(hints[f.name] in (np.ndarray, bytes, Any) for f in fields)  # type: ignore[attr-defined]
     REGISTRY[cls.__name__] = cls
     return cls
 
@@ -434,7 +323,8 @@ def encode(msg: Any) -> bytes:
     """Serialise a registered message to msgpack bytes (a map with `_type` for tools)."""
     if type(msg).__name__ not in REGISTRY:
         raise TypeError(f"{type(msg).__name__} is not a registered message type")
-    return pack(to_dict(msg))
+    d = to_dict(msg)
+    return pack(d) if msg._bulky else _packer().pack(d)
 
 
 def from_dict(cls: type[T], d: Any) -> T:
