@@ -86,7 +86,9 @@ class IdealDriver:
     gripper/state at 100 Hz, obeys arm/command in position mode within the joint limits and max
     velocities, announces driver_alive) for the robot `robot` of catalog entry `spec`
     (asibot.robots.RobotSpec). Starts at spec.home; `set_joints(q)` teleports it (rad).
-    The fingers move at 0.1 m/s and stop on an object of width `object_width` (m) if set."""
+    The fingers move at 0.1 m/s and stop on an object of width `object_width` (m) if set;
+    with `gripper_start_delay` (s) they start only that long after each gripper command, as
+    a slow gripper or a loaded machine does (and never, while it is `math.inf`)."""
 
     def __init__(self, robot: str, spec: Any) -> None:
         self.spec = spec
@@ -98,6 +100,9 @@ class IdealDriver:
         self.gripper_target = 0.0
         #: Width of an object between the fingers (m), or None: closing stops on it.
         self.object_width: float | None = None
+        #: How long after a gripper command the fingers start to move, s.
+        self.gripper_start_delay = 0.0
+        self._grip_pending: tuple[float, float] | None = None  # (opening, when commanded)
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self.bus = Bus("ideal-driver")
@@ -116,7 +121,8 @@ class IdealDriver:
                 self.target = np.clip(cmd.values, self.spec.lower, self.spec.upper)
 
     def _on_grip(self, cmd: GripperCommand) -> None:
-        self.gripper_target = cmd.opening
+        with self._lock:
+            self._grip_pending = (cmd.opening, time.monotonic())
 
     def set_joints(self, q) -> None:
         """Put the arm at q (rad) at once, holding there."""
@@ -132,6 +138,9 @@ class IdealDriver:
                 step = np.clip(self.target - self.q, -self.vmax * dt, self.vmax * dt)
                 self.q = self.q + step
                 q, v = self.q.tolist(), (step / dt).tolist()
+                if self._grip_pending is not None and \
+                        time.monotonic() >= self._grip_pending[1] + self.gripper_start_delay:
+                    self.gripper_target, self._grip_pending = self._grip_pending[0], None
                 floor = self.object_width if self.object_width is not None else 0.0
                 target = max(self.gripper_target, floor)
                 self.gripper += float(np.clip(target - self.gripper, -0.1 * dt, 0.1 * dt))
@@ -144,3 +153,27 @@ class IdealDriver:
         self._stop.set()
         self.thread.join(timeout=1.0)
         self.bus.close()
+
+
+class Inbox:
+    """A thread-safe list of what a subscription delivered: `bus.subscribe(key, T, inbox)`."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._items: list = []
+
+    def __call__(self, msg: object) -> None:
+        with self._lock:
+            self._items.append(msg)
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._items)
+
+    def all(self) -> list:
+        with self._lock:
+            return list(self._items)
+
+    def last(self) -> object:
+        with self._lock:
+            return self._items[-1]

@@ -43,7 +43,7 @@ class ArmDriver:
         self.on_event = on_event
         self.joints = config.joints
         self.ref = JointReference([j.lower for j in config.joints], [j.upper for j in config.joints],
-                                  [j.max_velocity for j in config.joints], config.period)
+                                  [j.max_velocity for j in config.joints], config.period, names=config.names)
         self._lock = threading.RLock()
         self._stop = threading.Event()
         self._up: set[int] = set()
@@ -78,27 +78,41 @@ class ArmDriver:
 
     # ------------------------------------------------------------ inputs (any thread)
     def command(self, mode: str, values: list[float], velocities: list[float] | None = None) -> bool:
-        """Apply an ArmCommand. Raises ValueError (and changes nothing) on bad input.
+        """Apply an ArmCommand. Raises ValueError (and changes nothing: the arm keeps its
+        previous motion) on bad input; motion.CommandRefused for a value beyond a joint's
+        limits or max speed, or not finite: such a command is refused whole, never clipped.
 
         Returns False when the command was ignored because of estop or a fault.
         """
         n = len(self.joints)
         if mode not in ("position", "velocity"):
+            self.counters["rejected_commands"] += 1
             raise ValueError(f"mode must be 'position' or 'velocity', got {mode!r}")
         if len(values) != n:
+            self.counters["rejected_commands"] += 1
             raise ValueError(f"the ASIBOT has {n} joints ({', '.join(self.config.names)}); "
                              f"the command has {len(values)} values")
         if velocities and len(velocities) != n:
+            self.counters["rejected_commands"] += 1
             raise ValueError(f"velocities must be empty or have {n} values, not {len(velocities)}")
+        values, velocities = list(values), list(velocities or [])
         with self._lock:
+            fb = self._feedback
+            measured = ([j.units.to_rad(fb[j.node].position) for j in self.joints]
+                        if all(j.node in fb for j in self.joints) else None)
+            try:
+                self.ref.check(mode, values, velocities, measured)
+            except ValueError:
+                self.counters["rejected_commands"] += 1
+                raise
             if self.estop or self._faulted:
                 self.counters["ignored_commands"] += 1
                 return False
             now = time.monotonic()
             if mode == "position":
-                self.ref.position(list(values), list(velocities or []), now)
+                self.ref.position(values, velocities, now, measured)
             else:
-                self.ref.velocity(list(values), now)
+                self.ref.velocity(values, now)
             self._watchdog_fired = False
             return True
 

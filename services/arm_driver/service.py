@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import logging
 import os
-import time
 
 from asibot import keys
 from asibot.arm_driver import canbus, config
@@ -19,6 +18,7 @@ from asibot.arm_driver.driver import ArmDriver, FaultError
 from asibot.arm_driver.master import CanopenMaster
 from asibot.bus import Bus
 from asibot.errors import RpcError
+from asibot.events import EventThrottle, refusal_reason
 from asibot.messages import ArmCommand, ArmState, EStop, Event
 from asibot.runtime import Service
 
@@ -49,9 +49,10 @@ class ArmDriverService(Service):
                 encoders=emulation.encoders_of(self.config))
         else:
             can_bus = canbus.open_bus(spec, self.config.bitrate)
-        self._last_event: dict[str, float] = {}
         self._state = bus.publisher(keys.arm_state(robot), ArmState)
         self._events = bus.publisher(keys.events(robot), Event)
+        # Refused commands: one Event a second per reason, the rest counted (issue 10).
+        self._refusals = EventThrottle(self._events.put)
         self.bus = bus
         self.driver = ArmDriver(CanopenMaster(can_bus, self.config), self.config,
                                 on_state=self._state.put, on_event=self._event)
@@ -70,14 +71,16 @@ class ArmDriverService(Service):
     def _on_command(self, key: str, cmd: ArmCommand) -> None:
         try:
             self.driver.command(cmd.mode, cmd.values, cmd.velocities)
-        except ValueError as exc:  # beyond the limits, wrong length: the driver's sentence
+        except ValueError as exc:  # beyond the limits, not finite, wrong length: the driver's sentence
             self.bus.reject(key, exc)
             self._refuse_command(key, exc)
 
     def _refuse_command(self, key: str, exc: Exception) -> None:
-        # Answered with an Event, as the driver contract asks, not only counted.
-        self._event("error", "bad_command", f"Arm command rejected, the arm keeps its previous motion: {exc}",
-                    throttle=1.0)
+        # Answered with an Event, as the driver contract asks, not only counted; a stream of
+        # refusals gives one Event a second per reason, with the count of the others.
+        self._refusals.event("error", "bad_command",
+                             f"Arm command refused, the arm keeps its previous motion: {str(exc).rstrip('.')}.",
+                             reason=f"arm:{refusal_reason(exc)}")
 
     def _on_estop(self, msg: EStop) -> None:
         self.driver.set_estop(msg.engaged, msg.reason)
@@ -125,16 +128,7 @@ class ArmDriverService(Service):
         return {}
 
     # ------------------------------------------------------------ out
-    def _event(self, level: str, code: str, text: str, throttle: float = 0.0) -> None:
-        # Throttled by sentence: a flood of the same bad command logs once a second, yet a
-        # different mistake is still reported at once.
-        now = time.monotonic()
-        if throttle:
-            if now - self._last_event.get(text, -1e9) < throttle:
-                return
-            if len(self._last_event) > 256:
-                self._last_event.clear()
-            self._last_event[text] = now
+    def _event(self, level: str, code: str, text: str) -> None:
         self._events.put(Event(level=level, code=code, text=text))
 
     # ------------------------------------------------------------ runtime hooks
@@ -142,6 +136,7 @@ class ArmDriverService(Service):
         return self.driver.health()
 
     def close(self) -> None:
+        self._refusals.close()
         self.driver.close()
         if self.emulator is not None:
             self.emulator.close()

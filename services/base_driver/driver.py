@@ -4,7 +4,9 @@ One I/O thread owns the line: it connects (and reconnects every second after the
 pulled), reads SIPs, refreshes the setpoint and runs the 200 ms cmd_vel watchdog. cmd_vel,
 estop and reset_fault arrive from other threads and write at once (lowest latency).
 Safety rules: a lost connection zeroes the setpoint, so a reconnect never resumes an old
-velocity; while the estop is engaged every motion command is ignored.
+velocity; while the estop is engaged every motion command is ignored; a cmd_vel beyond
+--max-vx / --max-wz (or not finite) is refused whole with a CommandRefused, never clamped and
+obeyed: the base keeps its previous command, which the watchdog ends 200 ms later.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from asibot.base_driver.params import RobotParams
 from asibot.base_driver.sip import is_sip, parse_sip
 from asibot.base_driver.state import BaseState, StateTracker
 from asibot.errors import RpcError
+from asibot.events import CommandRefused, quantity
 from asibot.messages import COMMAND_WATCHDOG_S
 
 log = logging.getLogger(__name__)
@@ -34,6 +37,8 @@ RECONNECT_PERIOD = 1.0
 #: (docs/arcos.md "Motion and watchdog").
 DEFAULT_MAX_VX = 0.5
 DEFAULT_MAX_WZ = math.radians(100)
+#: A cmd_vel this fraction over a limit is numerical noise: clamped to the limit, not refused.
+SPEED_TOLERANCE = 1e-3
 StateSink = Callable[[BaseState], None]
 
 
@@ -71,7 +76,7 @@ class BaseDriver:
         self._reported_unreachable = False
         self._notices = Notices(on_event)
         self.last_state: BaseState | None = None
-        self.counters = {"sips": 0, "cmd_vel": 0, "ignored_estop": 0, "clamped": 0,
+        self.counters = {"sips": 0, "cmd_vel": 0, "ignored_estop": 0, "refused": 0,
                          "watchdog_stops": 0, "reconnects": 0, "bad_checksums": 0,
                          "dropped_bytes": 0}
 
@@ -105,24 +110,41 @@ class BaseDriver:
 
     # ------------------------------------------------------------ commands
     def cmd_vel(self, vx: float, wz: float) -> bool:
-        """Obey a velocity command (m/s, rad/s). Returns False when it is ignored (estop, offline)."""
-        if not (math.isfinite(vx) and math.isfinite(wz)):
-            raise ValueError("cmd_vel needs finite vx and wz; nothing was changed")
+        """Obey a velocity command (m/s, rad/s). Returns False when it is ignored (estop, offline).
+
+        Raises CommandRefused, and changes nothing, when vx or wz is not finite or beyond the
+        driver's limits (more than SPEED_TOLERANCE over): refused, not clamped.
+        """
+        try:
+            self._check(vx, wz)
+        except CommandRefused:
+            with self._lock:
+                self.counters["refused"] += 1
+            raise
         with self._lock:
             self.counters["cmd_vel"] += 1
             if self._estop:
                 self.counters["ignored_estop"] += 1
                 return False
+            # Only the tolerated noise is clamped here.
             cvx = max(-self.max_vx, min(self.max_vx, vx))
             cwz = max(-self.max_wz, min(self.max_wz, wz))
-            if (cvx, cwz) != (vx, wz):
-                self.counters["clamped"] += 1
             self._last_cmd = time.monotonic()
             self._watchdog_tripped = False
             client = self._client
             if client is None:
                 return False
             return self._guarded(lambda: client.set_velocity(*arcos.to_firmware(cvx, cwz)))
+
+    def _check(self, vx: float, wz: float) -> None:
+        for name, v in (("vx", vx), ("wz", wz)):
+            if not math.isfinite(v):
+                raise CommandRefused("not_finite", f"{name} is {quantity(v)}, not a finite number")
+        for name, v, limit, unit, flag in (("vx", vx, self.max_vx, "m/s", "--max-vx"),
+                                           ("wz", wz, self.max_wz, "rad/s", "--max-wz")):
+            if abs(v) > limit * (1.0 + SPEED_TOLERANCE):
+                raise CommandRefused("speed_limit", f"{name} {quantity(v, unit, limit)} is beyond the driver's "
+                                                    f"limit {quantity(limit, unit, abs(v))} ({flag})")
 
     def set_estop(self, engaged: bool, reason: str = "") -> None:
         """Latched estop: engaging sends E_STOP at once; only a release re-enables motion."""

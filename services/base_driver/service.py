@@ -9,6 +9,7 @@ import os
 
 from asibot import keys
 from asibot.bus import Bus
+from asibot.events import EventThrottle, refusal_reason
 from asibot.messages import Battery, Bumpers, EStop, Event, Odometry, Sonar, Twist
 from asibot.runtime import Service
 
@@ -33,20 +34,35 @@ class BaseDriverService(Service):
         self._bumpers = bus.publisher(keys.base_bumpers(robot), Bumpers)
         self._battery = bus.publisher(keys.base_battery(robot), Battery)
         self._events = bus.publisher(keys.events(robot), Event)
+        # Refused commands: one Event a second per reason, the rest counted (issue 10).
+        self._refusals = EventThrottle(self._events.put)
+        self.bus = bus
         self.driver = BaseDriver(port, on_state=self._publish_state, on_event=self._publish_event,
                                  baud=baud, params=KNOWN[params] if params else None,
                                  max_vx=max_vx, max_wz=max_wz)
         self._angles: list[float] = []
         bus.subscribe(keys.estop(robot), EStop, self._on_estop, latest=True)
-        bus.subscribe(keys.base_cmd_vel(robot), Twist, self._on_cmd_vel)
+        bus.subscribe(keys.base_cmd_vel(robot), Twist, self._on_cmd_vel, with_key=True,
+                      on_reject=self._refuse_command)
         bus.serve(keys.driver_rpc(robot, "status"), self._status)
         bus.serve(keys.driver_rpc(robot, "reset_fault"), self._reset_fault)
         bus.announce(keys.driver_alive(robot))
         self.driver.start()
 
     # ------------------------------------------------------------ in
-    def _on_cmd_vel(self, msg: Twist) -> None:
-        self.driver.cmd_vel(msg.vx, msg.wz)
+    def _on_cmd_vel(self, key: str, msg: Twist) -> None:
+        try:
+            self.driver.cmd_vel(msg.vx, msg.wz)
+        except ValueError as exc:  # beyond --max-vx/--max-wz, not finite: the driver's sentence
+            self.bus.reject(key, exc)
+            self._refuse_command(key, exc)
+
+    def _refuse_command(self, key: str, exc: Exception) -> None:
+        # Answered with an Event, as the driver contract asks, not only counted; a stream of
+        # refusals gives one Event a second per reason, with the count of the others.
+        self._refusals.event("error", "bad_command",
+                             f"Base command refused, the base keeps its previous motion: {str(exc).rstrip('.')}.",
+                             reason=f"cmd_vel:{refusal_reason(exc)}")
 
     def _on_estop(self, msg: EStop) -> None:
         self.driver.set_estop(msg.engaged, msg.reason)
@@ -77,6 +93,7 @@ class BaseDriverService(Service):
         return {"connected": st["connected"], "mode": st["mode"], "fault": st["fault"], **st["counters"]}
 
     def close(self) -> None:
+        self._refusals.close()
         self.driver.close()
 
 
@@ -86,8 +103,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--baud", type=int, default=9600, help="serial baud rate (ARCOS starts at 9600)")
     p.add_argument("--params", choices=sorted(KNOWN), default=None,
                    help="force a parameter set instead of the SYNC2 subclass")
-    p.add_argument("--max-vx", type=float, default=DEFAULT_MAX_VX, help="speed limit, m/s (default 0.5)")
-    p.add_argument("--max-wz", type=float, default=DEFAULT_MAX_WZ, help="turn rate limit, rad/s (default 100 deg/s)")
+    p.add_argument("--max-vx", type=float, default=DEFAULT_MAX_VX, help="speed limit, m/s (default 0.5); a faster cmd_vel is refused")
+    p.add_argument("--max-wz", type=float, default=DEFAULT_MAX_WZ, help="turn rate limit, rad/s (default 100 deg/s); a faster cmd_vel is refused")
 
 
 def build(bus: Bus, args: argparse.Namespace) -> BaseDriverService:

@@ -15,16 +15,35 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from asibot.events import quantity
 from asibot.messages import COMMAND_WATCHDOG_S, ArmCommand
+
 FEEDFORWARD_HORIZON_S = 0.05
 """Longest extrapolation of a position reference by its velocity feed-forward."""
 FOLLOWING_ERROR_RAD = 0.25
 FOLLOWING_ERROR_TIME_S = 0.5
 """A joint that lags its reference by more than this, for this long, is blocked: fault."""
+POSITION_TOLERANCE_RAD = 1e-4
+VELOCITY_TOLERANCE = 1e-3
+"""Numerical noise, clamped rather than refused, as in the CANopen arm driver (its motion.py
+says why these values): a position 1e-4 rad past a limit (and never further out than where
+the joint is measured now: MuJoCo's servos overshoot a limit by up to 9 mrad as they arrive,
+and the kinematics service holds where it measured the arm), a speed 0.1 % over the max."""
 
 
 class CommandRejected(ValueError):
     """A command that is malformed or not allowed now; the message says what to do."""
+
+    reason = "state"
+
+
+class BadCommand(CommandRejected):
+    """A command with a value the robot must not be sent (beyond a limit, not finite, the wrong
+    size): refused whole, never clipped. `reason` is a short key for rate-limiting the refusals."""
+
+    def __init__(self, reason: str, sentence: str) -> None:
+        super().__init__(sentence)
+        self.reason = reason
 
 
 @dataclass
@@ -75,24 +94,36 @@ class JointTracker:
         return len(self.limits.names)
 
     # ------------------------------------------------------------------ inputs
-    def command(self, cmd: ArmCommand, now: float) -> None:
-        """Accept a command or raise CommandRejected (and change nothing)."""
+    def command(self, cmd: ArmCommand, now: float, q_measured: Sequence[float] | None = None) -> None:
+        """Accept a command or raise CommandRejected (and change nothing: the arm keeps its
+        previous motion). BadCommand for a value beyond a joint's limits or max speed, or not
+        finite: refused whole, never clipped. `q_measured` is where the joints are now."""
         if len(cmd.values) != self.n:
-            raise CommandRejected(
-                f"arm command has {len(cmd.values)} values but the arm has {self.n} joints "
-                f"({', '.join(self.limits.names)}); send one value per joint")
+            raise BadCommand("malformed",
+                             f"arm command has {len(cmd.values)} values but the arm has {self.n} joints "
+                             f"({', '.join(self.limits.names)}); send one value per joint")
         if cmd.velocities and len(cmd.velocities) != self.n:
-            raise CommandRejected(f"velocity feed-forward must be empty or have {self.n} values")
+            raise BadCommand("malformed", f"velocity feed-forward must be empty or have {self.n} values")
         values = np.asarray(cmd.values, float)
         ff = np.asarray(cmd.velocities, float) if cmd.velocities else None
-        if not np.all(np.isfinite(values)) or (ff is not None and not np.all(np.isfinite(ff))):
-            raise CommandRejected("arm command contains a value that is not finite; send real numbers")
+        for what, vector in (("", values), (" velocity feed-forward", ff)):
+            if vector is not None and not np.all(np.isfinite(vector)):
+                j = int(np.flatnonzero(~np.isfinite(vector))[0])
+                raise BadCommand("not_finite", f"joint {self.limits.names[j]}{what} got {quantity(float(vector[j]))}, "
+                                               "not a finite number")
+        if cmd.mode == "position":
+            self._within_limits(values, q_measured)
+            if ff is not None:
+                self._within_speeds(ff, "velocity feed-forward")
+        else:
+            self._within_speeds(values, "velocity")
         if self.estop:
             raise CommandRejected("the emergency stop is engaged; release it before moving the arm")
         if self.mode == "fault":
             raise CommandRejected(f"the arm is in fault ({self.fault}); call reset_fault first")
         self._command_time = now
         self._watchdog_fired = False
+        # Only the tolerated noise (or a way back from outside the limits) is clipped here.
         if cmd.mode == "position":
             self.mode = "position"
             self._target = np.clip(values, self.limits.lower, self.limits.upper)
@@ -103,6 +134,30 @@ class JointTracker:
             self.mode = "velocity"
             self._target = None
             self._velocity = np.clip(values, -self.limits.max_velocity, self.limits.max_velocity)
+
+    def _within_limits(self, values: np.ndarray, q_measured: Sequence[float] | None) -> None:
+        lo, hi = self.limits.lower, self.limits.upper
+        here = [self.q_ref]
+        if q_measured is not None and len(q_measured) == self.n and np.all(np.isfinite(q_measured)):
+            here.append(np.asarray(q_measured, float))
+        top = np.maximum.reduce([hi, *here]) + POSITION_TOLERANCE_RAD
+        bottom = np.minimum.reduce([lo, *here]) - POSITION_TOLERANCE_RAD
+        for j in range(self.n):
+            v = float(values[j])
+            if v > top[j]:
+                raise BadCommand("position_limit", f"joint {self.limits.names[j]} position "
+                                 f"{quantity(v, 'rad', hi[j])} is beyond its upper limit {quantity(hi[j], 'rad', v)}")
+            if v < bottom[j]:
+                raise BadCommand("position_limit", f"joint {self.limits.names[j]} position "
+                                 f"{quantity(v, 'rad', lo[j])} is beyond its lower limit {quantity(lo[j], 'rad', v)}")
+
+    def _within_speeds(self, values: np.ndarray, what: str) -> None:
+        vmax = self.limits.max_velocity
+        for j in range(self.n):
+            v, m = float(values[j]), float(vmax[j])
+            if abs(v) > m * (1.0 + VELOCITY_TOLERANCE):
+                raise BadCommand("speed_limit", f"joint {self.limits.names[j]} {what} {quantity(v, 'rad/s', m)} "
+                                                f"is beyond its max speed {quantity(m, 'rad/s', abs(v))}")
 
     def set_estop(self, engaged: bool, reason: str = "", stopped: str = "the arm is holding its position") -> None:
         """Latch or release the emergency stop; engaging stops the arm where it is."""

@@ -3,7 +3,9 @@ odometry, independent of MuJoCo and of the bus.
 
 Numbers (docs/arcos.md, "P3-AT parameters"): P3-AT MaxVelocity 1.2 m/s and MaxRVelocity
 300 deg/s (ARIA p3at-sh.p). ARIA leaves accelerations to the firmware; we use the p2os
-navigation limits acc_lim_x 2.5 m/s^2 and acc_lim_th 3.2 rad/s^2 as the ramp.
+navigation limits acc_lim_x 2.5 m/s^2 and acc_lim_th 3.2 rad/s^2 as the ramp. A command
+beyond the P3-AT's max speeds (more than SPEED_TOLERANCE over) is refused whole, never
+clamped: the base keeps its previous command, which the watchdog ends 200 ms later.
 """
 
 from __future__ import annotations
@@ -14,13 +16,16 @@ from typing import Callable
 
 import numpy as np
 
+from asibot.events import quantity
 from asibot.messages import COMMAND_WATCHDOG_S
-from asibot.sim.arm import CommandRejected, Notice
+from asibot.sim.arm import BadCommand, CommandRejected, Notice
 
 MAX_VX = 1.2
 MAX_WZ = math.radians(300.0)
 ACC_X = 2.5
 ACC_WZ = 3.2
+SPEED_TOLERANCE = 1e-3
+"""A command this fraction over a max speed is numerical noise: clamped, not refused."""
 
 
 @dataclass
@@ -36,8 +41,13 @@ class BaseDrive:
     _watchdog_fired: bool = True
 
     def command(self, vx: float, wz: float, now: float) -> None:
-        if not (math.isfinite(vx) and math.isfinite(wz)):
-            raise CommandRejected("base command contains a value that is not finite; send real numbers")
+        for name, v in (("vx", vx), ("wz", wz)):
+            if not math.isfinite(v):
+                raise BadCommand("not_finite", f"{name} is {quantity(v)}, not a finite number")
+        for name, v, limit, unit, what in (("vx", vx, MAX_VX, "m/s", "speed"), ("wz", wz, MAX_WZ, "rad/s", "turn rate")):
+            if abs(v) > limit * (1.0 + SPEED_TOLERANCE):
+                raise BadCommand("speed_limit", f"{name} {quantity(v, unit, limit)} is beyond the P3-AT's max {what} "
+                                                f"{quantity(limit, unit, abs(v))}")
         if self.estop:
             raise CommandRejected("the emergency stop is engaged; release it before driving")
         self._goal = (float(np.clip(vx, -MAX_VX, MAX_VX)), float(np.clip(wz, -MAX_WZ, MAX_WZ)))

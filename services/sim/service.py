@@ -20,9 +20,10 @@ from asibot import keys
 from asibot import messages as m
 from asibot.bus import Bus
 from asibot.errors import MessageError, RpcError
+from asibot.events import EventThrottle
 from asibot.runtime import Service
 from asibot.sim import viewer
-from asibot.sim.arm import CommandRejected, Notice
+from asibot.sim.arm import BadCommand, CommandRejected, Notice
 from asibot.sim.cameras import Camera
 from asibot.sim.scene import WORLDS
 from asibot.sim.simulation import Simulation, world_for
@@ -72,13 +73,17 @@ class SimService(Service):
         if options.camera_hz <= 0:
             self._cameras_ready.set()
         self._commands_rejected = 0
+        # Refused commands: one Event a second per reason, the rest counted (issue 10).
+        self._refusals = EventThrottle(self._pub_event.put)
         self._frames = 0
         self._rtf = 0.0
-        bus.subscribe(keys.arm_command(rid), m.ArmCommand, self._on_arm_command, on_reject=self._malformed)
+        bus.subscribe(keys.arm_command(rid), m.ArmCommand, self._on_arm_command,
+                      on_reject=lambda k, exc: self._malformed("arm", k, exc))
         bus.subscribe(keys.gripper_command(rid), m.GripperCommand, self._on_gripper_command,
-                      on_reject=self._malformed)
+                      on_reject=lambda k, exc: self._malformed("gripper", k, exc))
         if sim.base:
-            bus.subscribe(keys.base_cmd_vel(rid), m.Twist, self._on_cmd_vel, on_reject=self._malformed)
+            bus.subscribe(keys.base_cmd_vel(rid), m.Twist, self._on_cmd_vel,
+                          on_reject=lambda k, exc: self._malformed("cmd_vel", k, exc))
         bus.subscribe(keys.estop(rid), m.EStop, self._on_estop, latest=True)
         bus.watch(keys.controller_alive(rid), self._on_controller)
         for verb, handler in {"status": self._rpc_status, "reset_fault": self._rpc_reset_fault,
@@ -94,38 +99,47 @@ class SimService(Service):
             t.start()
 
     # ------------------------------------------------------------------ commands in
-    def _malformed(self, key: str, exc: MessageError) -> None:
-        self._reject(f"Rejected a malformed command on {key}: {exc}")
+    # Every refusal is answered with an Event (the driver contract), at most one a second per
+    # reason: a stream of bad commands gives one Event a second with the count of the others.
+    WHO = {"arm": "Arm command refused, the arm keeps its previous motion",
+           "gripper": "Gripper command refused, the gripper keeps its previous opening",
+           "cmd_vel": "Base command refused, the base keeps its previous motion"}
 
-    def _reject(self, text: str) -> None:
+    def _malformed(self, topic: str, key: str, exc: MessageError) -> None:
+        reason = "not_finite" if "not finite" in exc.problem else "malformed"
+        self._reject(topic, reason, f"{self.WHO[topic]}: {exc}")
+
+    def _reject(self, topic: str, reason: str, text: str) -> None:
         self._commands_rejected += 1
-        log.warning("%s", text)
-        self._pub_event.put(m.Event(level="error", code="bad_command", text=text))
+        text = f"{text.rstrip('.')}."
+        if self._refusals.event("error", "bad_command", text, reason=f"{topic}:{reason}"):
+            log.warning("%s", text)
 
-    def _ignored(self, exc: CommandRejected) -> None:
-        """Commands refused because of the state (estop, fault) are logged, not shouted."""
-        if self.sim.estop:
+    def _ignored(self, topic: str, exc: CommandRejected) -> None:
+        """Bad values are refused with an Event; commands refused because of the state are
+        logged, not shouted, during an estop."""
+        if self.sim.estop and not isinstance(exc, BadCommand):
             log.debug("ignored a command: %s", exc)
         else:
-            self._reject(f"Rejected a command: {exc}.")
+            self._reject(topic, exc.reason, f"{self.WHO[topic]}: {exc}")
 
     def _on_arm_command(self, cmd: m.ArmCommand) -> None:
         try:
             self.sim.command_arm(cmd)
         except CommandRejected as exc:
-            self._ignored(exc)
+            self._ignored("arm", exc)
 
     def _on_gripper_command(self, cmd: m.GripperCommand) -> None:
         try:
             self.sim.command_gripper(cmd.opening)
         except CommandRejected as exc:
-            self._ignored(exc)
+            self._ignored("gripper", exc)
 
     def _on_cmd_vel(self, cmd: m.Twist) -> None:
         try:
             self.sim.command_base(cmd.vx, cmd.wz)
         except CommandRejected as exc:
-            self._ignored(exc)
+            self._ignored("cmd_vel", exc)
 
     def _on_estop(self, msg: m.EStop) -> None:
         self.sim.set_estop(msg.engaged, msg.reason)
@@ -268,6 +282,7 @@ class SimService(Service):
                 "estop": self.sim.estop, "arm_mode": self.sim.arm.mode}
 
     def close(self) -> None:
+        self._refusals.close()
         self.stop_event.set()
         for t in self._threads:
             t.join(timeout=1.5)

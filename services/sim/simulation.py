@@ -17,7 +17,7 @@ import numpy as np
 
 from asibot import messages as m
 from asibot.sim import sensors
-from asibot.sim.arm import CommandRejected, JointLimits, JointTracker, Notice
+from asibot.sim.arm import BadCommand, CommandRejected, JointLimits, JointTracker, Notice
 from asibot.sim.base import BaseDrive, Odometer
 from asibot.sim.places import load_places
 from asibot.sim.scene import WORLDS, Scene, build
@@ -99,13 +99,14 @@ class Simulation:
 
     # ------------------------------------------------------------------ commands
     def command_arm(self, cmd: m.ArmCommand) -> None:
-        """Raises CommandRejected (nothing changes) for a bad or forbidden command."""
+        """Raises CommandRejected (nothing changes) for a bad or forbidden command: BadCommand
+        for a value beyond a joint's limits or max speed, or not finite (refused, not clipped)."""
         with self.lock:
-            self.arm.command(cmd, self.time)
+            self.arm.command(cmd, self.time, q_measured=self.data.qpos[self.scene.arm_qpos])
 
     def command_gripper(self, opening: float) -> None:
         if not math.isfinite(opening):
-            raise CommandRejected("gripper opening is not finite; send metres between the fingers")
+            raise BadCommand("not_finite", "gripper opening is not finite; send metres between the fingers")
         with self.lock:
             if self.estop:
                 raise CommandRejected("the emergency stop is engaged; release it before using the gripper")
@@ -114,7 +115,7 @@ class Simulation:
     def command_base(self, vx: float, wz: float) -> None:
         with self.lock:
             if self.base is None:
-                raise CommandRejected(f"{self.robot.robot_id} has no mobile base")
+                raise BadCommand("no_base", f"{self.robot.robot_id} has no mobile base")
             self.base.command(vx, wz, self.time)
 
     def set_estop(self, engaged: bool, reason: str = "") -> None:

@@ -51,14 +51,18 @@ def test_position_commands_reach_the_drives_within_speed_limits(rig):
     assert step <= rig.cfg.joints[0].units.to_counts(V * rig.cfg.period) + 1
 
 
-def test_the_driver_clamps_to_the_joint_limits_again(rig):
+def test_the_driver_refuses_a_goal_past_the_limits_and_stops_at_a_limit(rig):
     d = up(rig)
     rig.emu.drives[2].max_speed_counts *= 40            # let the test finish quickly:
-    d.ref.vmax = [v * 40 for v in d.ref.vmax]           # the clamp is what matters here
-    d.command("position", [0.0, 3.0, 0.0, 0.0, 0.0])
+    d.ref.vmax = [v * 40 for v in d.ref.vmax]           # the limits are what matter here
+    with pytest.raises(ValueError, match=r"joint q2 position 3 rad is beyond its upper limit 2.36 rad"):
+        d.command("position", [0.0, 3.0, 0.0, 0.0, 0.0])
+    assert d.counters["rejected_commands"] == 1 and d.ref.mode == "idle"
+    d.command("position", [0.0, math.radians(135), 0.0, 0.0, 0.0])
     wait_until(lambda: abs(rig.last.positions[1] - math.radians(135)) < 1e-4, 5)
-    time.sleep(0.05)
-    assert rig.last.positions[1] == pytest.approx(math.radians(135), abs=1e-4)
+    n = len(rig.states)
+    wait_until(lambda: len(rig.states) >= n + 10, 5)
+    assert max(s.positions[1] for s in rig.states[n:]) <= math.radians(135) + 5e-6   # half a count
 
 
 def test_bad_commands_raise_and_change_nothing(rig):

@@ -11,10 +11,11 @@ import pytest
 
 from asibot.base_driver import codec
 from asibot.base_driver.codec import Cmd, Deframer
-from asibot.base_driver.driver import BaseDriver
+from asibot.base_driver.driver import SPEED_TOLERANCE, BaseDriver
 from asibot.base_driver.emulator import ArcosEmulator
 from asibot.base_driver.sip import parse_sip
 from asibot.errors import RpcError
+from asibot.events import CommandRefused
 from asibot.testing import wait_until
 
 
@@ -80,16 +81,21 @@ def test_turning_reports_heading_and_rate(rig):
     assert rec.states[-1].theta > math.radians(30)
 
 
-def test_speed_is_clamped_to_the_driver_limit(rig):
+def test_speed_beyond_the_driver_limit_is_refused_not_clamped(rig):
     drv, emu, rec = rig
     t0 = time.monotonic()
-    drv.cmd_vel(3.0, -10.0)
-    wait_until(lambda: commands_since(emu, t0, Cmd.RVEL), 1)
-    assert commands_since(emu, t0, Cmd.VEL)[-1][1] == 500          # 0.5 m/s (p2os default)
-    assert commands_since(emu, t0, Cmd.RVEL)[-1][1] == -100        # 100 deg/s
-    with pytest.raises(ValueError):
+    with pytest.raises(CommandRefused, match=r"vx 3 m/s is beyond the driver's limit 0.5 m/s \(--max-vx\)"):
+        drv.cmd_vel(3.0, 0.0)
+    with pytest.raises(CommandRefused, match=r"wz -10 rad/s is beyond the driver's limit 1.75 rad/s \(--max-wz\)"):
+        drv.cmd_vel(0.0, -10.0)
+    with pytest.raises(CommandRefused, match="vx is nan, not a finite number"):
         drv.cmd_vel(float("nan"), 0.0)
-    assert drv.counters["clamped"] == 1
+    # At the limit, and a hair over it (numerical noise), is obeyed at the limit.
+    drv.cmd_vel(0.5 * (1 + SPEED_TOLERANCE / 2), -math.radians(100))
+    wait_until(lambda: commands_since(emu, t0, Cmd.RVEL), 1)
+    assert [a for _, a in commands_since(emu, t0, Cmd.VEL)] == [500]     # 0.5 m/s (p2os default)
+    assert [a for _, a in commands_since(emu, t0, Cmd.RVEL)] == [-100]   # 100 deg/s
+    assert drv.counters["refused"] == 3 and drv.counters["cmd_vel"] == 1
 
 
 def test_watchdog_stops_the_base_200_ms_after_the_last_cmd_vel(rig):

@@ -1,13 +1,15 @@
 """The driver's arm rules, without physics: limits, speeds, watchdog, estop, faults."""
 
 import math
+import re
 
 import numpy as np
 import pytest
 
 from asibot.messages import ArmCommand
 from asibot.messages import COMMAND_WATCHDOG_S
-from asibot.sim.arm import CommandRejected, JointLimits, JointTracker
+from asibot.sim.arm import (POSITION_TOLERANCE_RAD, VELOCITY_TOLERANCE, BadCommand, CommandRejected, JointLimits,
+                            JointTracker)
 
 DT = 0.002
 
@@ -25,14 +27,45 @@ def run(t, seconds, start=0.0, follow=True):
     return now
 
 
-def test_position_is_reached_at_the_max_speed_and_clamped_to_limits():
+def test_position_is_reached_at_the_max_speed_and_stays_within_limits():
     t = tracker()
-    t.command(ArmCommand(mode="position", values=[5.0, -0.5]), 0.0)
+    t.command(ArmCommand(mode="position", values=[1.0 + POSITION_TOLERANCE_RAD / 2, -0.5]), 0.0)
     run(t, 0.5)
     assert t.q_ref[0] == pytest.approx(0.25, abs=1e-9)    # 0.5 rad/s for 0.5 s
     assert t.q_ref[1] == pytest.approx(-0.5, abs=1e-9)    # reached
     run(t, 5.0, 0.5)
-    assert t.q_ref[0] == pytest.approx(1.0)                # clamped at the upper limit
+    assert t.q_ref[0] == 1.0                               # noise past the limit: clamped to it
+
+
+@pytest.mark.parametrize("mode, values, ff, says", [
+    ("position", [1e300, 0.0], None, "joint a position 1e+300 rad is beyond its upper limit 1 rad"),
+    ("position", [0.0, -2.01], None, "joint b position -2.01 rad is beyond its lower limit -2 rad"),
+    ("position", [1.001, 0.0], None, "joint a position 1.001 rad is beyond its upper limit 1 rad"),
+    ("position", [0.0, 0.0], [0.0, 1.5], "joint b velocity feed-forward 1.5 rad/s is beyond its max speed 1 rad/s"),
+    ("velocity", [9.0, 0.0], None, "joint a velocity 9 rad/s is beyond its max speed 0.5 rad/s"),
+    ("velocity", [0.0, -1e300], None, "joint b velocity -1e+300 rad/s is beyond its max speed 1 rad/s"),
+    ("position", [0.0, math.nan], None, "joint b got nan, not a finite number"),
+])
+def test_values_past_a_limit_are_refused_not_clipped(mode, values, ff, says):
+    t = tracker()
+    t.command(ArmCommand(mode="position", values=[0.5, 0.5]), 0.0)
+    cmd = ArmCommand(mode=mode, values=[0.0, 0.0], velocities=[0.0, 0.0] if ff else [])
+    cmd.values, cmd.velocities = values, ff or []   # bypass the message's own checks (NaN)
+    with pytest.raises(BadCommand, match=re.escape(says)):
+        t.command(cmd, 0.1)
+    run(t, 2.0, 0.1)
+    assert t.mode == "position" and t.q_ref == pytest.approx([0.5, 0.5])   # the previous goal
+
+
+def test_a_joint_measured_past_a_limit_may_be_held_there():
+    """MuJoCo's servos overshoot a limit by a few mrad as they arrive; the kinematics service
+    holds where it measured the arm: not refused, and the reference stays within the limits."""
+    t = tracker()
+    t.command(ArmCommand(mode="position", values=[1.008, 0.0]), 0.0, q_measured=[1.008, 0.0])
+    with pytest.raises(BadCommand, match="upper limit"):
+        t.command(ArmCommand(mode="position", values=[1.02, 0.0]), 0.0, q_measured=[1.008, 0.0])
+    run(t, 3.0)
+    assert t.q_ref[0] == 1.0
 
 
 def test_wrong_joint_count_is_rejected_and_changes_nothing():
@@ -50,7 +83,7 @@ def test_non_finite_values_are_rejected():
     t = tracker()
     cmd = ArmCommand(mode="velocity", values=[0.1, 0.1])
     cmd.values = [math.nan, 0.0]  # bypass the message's own check, as a buggy decoder might
-    with pytest.raises(CommandRejected, match="not finite"):
+    with pytest.raises(CommandRejected, match="joint a got nan, not a finite number"):
         t.command(cmd, 0.0)
     assert t.mode == "idle"
 
@@ -64,10 +97,11 @@ def test_velocity_mode_stops_after_the_watchdog_and_says_so():
     assert [n.code for n in notices] == ["watchdog"]
 
 
-def test_velocity_is_clamped_to_max_speed():
+def test_velocity_noise_over_the_max_speed_is_clamped():
     t = tracker()
+    over = 1 + VELOCITY_TOLERANCE / 2
     for k in range(50):  # keep the watchdog fed for 0.1 s
-        t.command(ArmCommand(mode="velocity", values=[9.0, -9.0]), k * DT)
+        t.command(ArmCommand(mode="velocity", values=[0.5 * over, -1.0 * over]), k * DT)
         t.step(t.q_ref, DT, (k + 1) * DT)
     assert t.q_ref[0] == pytest.approx(0.5 * 0.1, rel=1e-6)
     assert t.q_ref[1] == pytest.approx(-1.0 * 0.1, rel=1e-6)

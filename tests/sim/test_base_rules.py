@@ -1,29 +1,31 @@
 """The base's driver rules and odometry, without physics."""
 
 import math
+import re
 
 import pytest
 
-from asibot.sim.arm import CommandRejected
-from asibot.sim.base import ACC_X, MAX_VX, BaseDrive, Odometer
+from asibot.sim.arm import BadCommand, CommandRejected
+from asibot.sim.base import ACC_X, MAX_VX, MAX_WZ, SPEED_TOLERANCE, BaseDrive, Odometer
 
 DT = 0.002
 
 
 def test_speed_ramps_up_and_is_capped():
     b = BaseDrive()
-    b.command(5.0, 0.0, 0.0)
+    five = MAX_VX * (1 + SPEED_TOLERANCE / 2)   # a hair over the max: noise, clamped
+    b.command(five, 0.0, 0.0)
     t = 0.0
     for _ in range(50):
         t += DT
         vx, _ = b.step(DT, t)
     assert vx == pytest.approx(ACC_X * 0.1)
     for _ in range(50):
-        b.command(5.0, 0.0, t)
+        b.command(five, 0.0, t)
         t += DT
         vx, _ = b.step(DT, t)
     for _ in range(500):
-        b.command(5.0, 0.0, t)
+        b.command(five, 0.0, t)
         t += DT
         vx, _ = b.step(DT, t)
     assert vx == pytest.approx(MAX_VX)
@@ -56,8 +58,26 @@ def test_estop_stops_at_once_and_refuses_commands_until_released():
 
 def test_non_finite_command_is_rejected():
     b = BaseDrive()
-    with pytest.raises(CommandRejected, match="not finite"):
+    with pytest.raises(CommandRejected, match="vx is inf, not a finite number"):
         b.command(math.inf, 0.0, 0.0)
+
+
+@pytest.mark.parametrize("vx, wz, says", [
+    (1e300, 0.0, "vx 1e+300 m/s is beyond the P3-AT's max speed 1.2 m/s"),
+    (-1.3, 0.0, "vx -1.3 m/s is beyond the P3-AT's max speed 1.2 m/s"),
+    (0.0, 6.0, "wz 6 rad/s is beyond the P3-AT's max turn rate 5.24 rad/s"),
+])
+def test_speeds_beyond_the_p3at_are_refused_not_clamped(vx, wz, says):
+    b = BaseDrive()
+    b.command(0.3, 0.1, 0.0)
+    with pytest.raises(BadCommand, match=re.escape(says)):
+        b.command(vx, wz, 0.1)
+    t = 0.0
+    for _ in range(50):
+        t += DT
+        b.step(DT, t)
+    assert (b.vx, b.wz) == pytest.approx((min(0.3, ACC_X * 0.1), 0.1))   # the previous command goes on
+    assert MAX_WZ < 6.0
 
 
 def test_exact_odometry_integrates_a_circle():

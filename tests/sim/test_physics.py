@@ -7,7 +7,7 @@ import pytest
 from .sim_reach import move_to, solve_down
 
 from asibot.messages import ArmCommand
-from asibot.sim.arm import CommandRejected
+from asibot.sim.arm import BadCommand, CommandRejected
 
 TOL = math.radians(0.5)
 
@@ -32,14 +32,43 @@ def test_commanded_joint_positions_are_reached(world, request):
     assert np.max(np.abs(state.velocities)) < 0.01
 
 
-def test_position_command_beyond_limits_stops_at_the_limit(kitchen):
+def test_position_command_beyond_limits_is_refused_and_moves_nothing(kitchen):
     upper = np.array(kitchen.robot.upper)
     goal = np.array(kitchen.robot.home, float)
     goal[1] = upper[1] + 1.0
-    kitchen.command_arm(ArmCommand(mode="position", values=goal.tolist()))
-    assert kitchen.arm.q_ref[1] <= upper[1]
-    kitchen.step(10)
-    assert kitchen.arm._target[1] == pytest.approx(upper[1])
+    before = kitchen.arm_state().positions
+    with pytest.raises(BadCommand, match=r"joint q2 position 3.36 rad is beyond its upper limit 2.36 rad"):
+        kitchen.command_arm(ArmCommand(mode="position", values=goal.tolist()))
+    kitchen.step(int(0.5 / kitchen.dt))
+    assert kitchen.arm_state().positions == pytest.approx(before, abs=1e-3) and kitchen.arm.mode == "idle"
+
+
+@pytest.mark.parametrize("values", [[1e300] * 5, [math.nan, 0, 0, 0, 0], [0, 0, 0, 0, -1e300]])
+def test_huge_and_non_finite_positions_are_refused(kitchen, values):
+    before = kitchen.arm_state().positions
+    cmd = ArmCommand(mode="position", values=[0.0] * 5)
+    cmd.values = values                   # bypass the message's own check (NaN)
+    with pytest.raises(BadCommand, match="joint q[15] "):
+        kitchen.command_arm(cmd)
+    kitchen.step(int(0.5 / kitchen.dt))
+    assert kitchen.arm_state().positions == pytest.approx(before, abs=1e-3)
+
+
+def test_a_goal_at_a_limit_is_reached_and_never_passed(kitchen):
+    """And the hold the kinematics service sends on a stop, at a position measured a few
+    mrad past the limit while the servo overshoots, is not refused."""
+    upper = kitchen.robot.upper[2]
+    goal = [0.0, 0.0, upper, 0.0, 0.0]
+    kitchen.command_arm(ArmCommand(mode="position", values=goal))
+    peak = -1.0
+    for _ in range(int(8.0 / kitchen.dt) // 5):
+        kitchen.step(5)
+        q = kitchen.arm_state().positions
+        peak = max(peak, q[2])
+        kitchen.command_arm(ArmCommand(mode="position", values=q))   # hold where it is: accepted
+        kitchen.command_arm(ArmCommand(mode="position", values=goal))
+    assert kitchen.arm.q_ref[2] == upper
+    assert peak <= upper + 0.01
 
 
 def test_velocity_mode_watchdog_stops_the_arm(kitchen):

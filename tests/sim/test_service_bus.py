@@ -81,6 +81,19 @@ def test_the_sim_process_speaks_the_driver_contract(sim_process):
         bus.put_raw(keys.arm_command(ROBOT), m.pack({"mode": "position", "values": [1.0, 2.0]}))
         wait_until(lambda: any(e.code == "bad_command" for e in events.since(0)), timeout=5)
 
+        # a huge position is refused, not clipped: an event names the joint, the value and the
+        # limit, and the arm keeps its previous goal
+        wait_until(lambda: abs(arm.last().positions[0] - goal[0]) < 1e-3
+                   and max(map(abs, arm.last().velocities)) < 1e-3, timeout=10)
+        here = goal
+        bus.put_raw(keys.arm_command(ROBOT), m.pack({"mode": "position", "values": [1e300] * 5}))
+        wait_until(lambda: any("position 1e+300 rad is beyond its upper limit" in e.text
+                               for e in events.since(0)), timeout=5)
+        t2 = time.monotonic()
+        wait_until(lambda: len(arm.since(t2)) >= 30, timeout=5)
+        dev = max(float(np.max(np.abs(np.subtract(s.positions, here)))) for s in arm.since(t2))
+        assert dev < 2e-3, (dev, here, arm.since(t2)[-1].positions)
+
         # the base drives, then the latched estop stops it and it ignores further commands
         drive = bus.publisher(keys.base_cmd_vel(ROBOT), m.Twist)
         for _ in range(25):
