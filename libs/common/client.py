@@ -118,7 +118,9 @@ class CartesianClient:
         self._call("tool", tool=tool)
 
     def act(self, action: str) -> dict:
-        """Gripper "open" or "close"; returns once the fingers stop: {"opening": m, "holding": bool}."""
+        """Gripper "open" or "close"; returns once the fingers have moved and stopped (at once if
+        they are there already): {"opening": m, "holding": bool}. RpcError "timeout" when they
+        do not start within 1.5 s of the command or are still moving after 4 s."""
         reply = self._call("act", action=action)
         return {"opening": reply["opening"], "holding": reply["holding"]}
 

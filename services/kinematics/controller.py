@@ -7,6 +7,19 @@ Rules: motion is refused while the estop is engaged ("estop"), without a driver
 ("unavailable"), with a faulted driver ("fault"), and while another planned motion runs
 ("busy"; stop or wait first). Streaming modes (movv, pointer) stop after 200 ms without a new
 command, like the driver's own watchdog (docs/foundation-api.md, "Contracts").
+
+Planning never holds the controller: a movj or movl is planned (`plan_movj`, `plan_movl`)
+from a snapshot of the measured joints taken under the lock, without the lock, and only
+`start` takes it again to begin the planned motion. Stop, state and the control loop are
+therefore never blocked by a request, however long its path check takes. A plan starts only
+if nothing happened to the controller since its snapshot; otherwise it is refused and
+nothing moves:
+- the estop was engaged (even if released since): "estop";
+- the arm reported a new fault: "fault"; the driver vanished: "unavailable";
+- a `stop` came: "busy", a stop cancels the motions being planned as well as the running one;
+- another motion started meanwhile (a movj, movl, movv or pointer): "busy".
+Asking for a movj or movl ends a running stream (movv, pointer) first: the arm holds still
+while the new motion is planned, so the plan starts where the arm is.
 """
 
 from __future__ import annotations
@@ -45,6 +58,14 @@ class Spec(Protocol):
 
 
 @dataclass
+class Planned:
+    """A motion planned outside the lock, to be started with Controller.start."""
+    state: str                  # MOVJ or MOVL
+    plan: trajectory.JointPlan
+    ticket: int                 # the controller's epoch at the snapshot
+
+
+@dataclass
 class Reference:
     """What the server sends as ArmCommand(mode="position")."""
     positions: list[float]
@@ -77,6 +98,10 @@ class Controller:
         self._stream_seen = 0.0
         self._last_tick: float | None = None
         self._send_hold = False
+        # Bumped by everything that must cancel a motion being planned (stop, estop, fault,
+        # driver loss, another motion), with what it was, for the refusal's sentence.
+        self._epoch = 0
+        self._interrupt = RpcError("busy", "The controller changed")
 
     # --- inputs -------------------------------------------------------------------------
     def on_arm_state(self, positions: Sequence[float], fault: str) -> None:
@@ -86,22 +111,25 @@ class Controller:
                 return
             self.q = q
             if fault and not self.fault:
-                self._abort(RpcError("fault", f"The arm reports a fault: {fault} Reset it, then retry."))
+                self._cancel(RpcError("fault", f"The arm reports a fault: {fault} Reset it, then retry."),
+                             "A fault of the arm")
             self.fault = fault
 
     def on_estop(self, engaged: bool, reason: str) -> None:
         with self._lock:
             self.estop, self.estop_reason = bool(engaged), reason
             if engaged:
-                self._abort(RpcError("estop", f"Stopped by the emergency stop{': ' + reason if reason else ''}."))
+                self._cancel(RpcError("estop", f"Stopped by the emergency stop{': ' + reason if reason else ''}."),
+                             "The emergency stop")
 
     def on_driver(self, alive: bool) -> None:
         with self._lock:
             self.driver_alive = alive
             if not alive:
                 self.q = None
-                self._abort(RpcError("unavailable", "The arm driver disappeared; the motion was stopped. "
-                                                    "Start the driver (or the sim), then retry."))
+                self._cancel(RpcError("unavailable", "The arm driver disappeared; the motion was stopped. "
+                                                     "Start the driver (or the sim), then retry."),
+                             "The loss of the arm driver")
 
     # --- requests -----------------------------------------------------------------------
     def check_can_move(self) -> np.ndarray:
@@ -121,32 +149,61 @@ class Controller:
 
     def movj(self, q_target: np.ndarray, now: float, *, duration: float | None = None,
              speed: float | None = None) -> float:
-        """Start a joint-space move; returns its duration in s."""
-        with self._lock:
-            q0 = self.check_can_move()
-            self._check_idle()
-            q1 = np.asarray(q_target, float)
-            bad = np.flatnonzero((q1 < self.lower) | (q1 > self.upper))
-            if bad.size:
-                j = int(bad[0])
-                raise RpcError("joint_limit", f"Joint {j + 1} target {np.degrees(q1[j]):.1f} deg is outside its limits "
-                                              f"{np.degrees(self.lower[j]):.0f}..{np.degrees(self.upper[j]):.0f} deg.")
-            plan = trajectory.plan_movj(q0, q1, self.vmax, duration=duration, speed=speed)
-            self._start(MOVJ, plan, now)
-            return plan.duration
+        """Plan and start a joint-space move; returns its duration in s."""
+        return self.start(self.plan_movj(q_target, duration=duration, speed=speed), now)
 
     def movl(self, pose_target: np.ndarray, now: float, *, duration: float | None = None,
              speed: float | None = None, describe: Any = None) -> float:
-        """Start a straight-line move to an SI pose after checking the whole path."""
+        """Plan and start a straight-line move to an SI pose after checking the whole path."""
+        return self.start(self.plan_movl(pose_target, duration=duration, speed=speed, describe=describe), now)
+
+    def _snapshot(self) -> tuple[np.ndarray, int]:
+        """The measured joints to plan from and the epoch to start against; refuses what
+        cannot move now. Ends a running stream: the arm holds while the motion is planned."""
         with self._lock:
             q0 = self.check_can_move()
             self._check_idle()
-            p0 = np.asarray(self.model.fwd(q0), float)
-            kw = {"describe": describe} if describe else {}
-            plan = trajectory.plan_movl(self.model, q0, p0, pose_target, self.lower, self.upper, self.vmax,
-                                        duration=duration, speed=speed, **kw)
-            self._start(MOVL, plan, now)
-            return plan.duration
+            if self.state in (MOVV, POINTER):
+                self._abort(None)
+            return q0, self._epoch
+
+    def plan_movj(self, q_target: np.ndarray, *, duration: float | None = None,
+                  speed: float | None = None) -> Planned:
+        """Plan an isochronous joint move from the measured joints (the lock is held only for
+        the snapshot); `start` begins it."""
+        q1 = np.asarray(q_target, float)
+        bad = np.flatnonzero(~((q1 >= self.lower) & (q1 <= self.upper)))
+        if bad.size:
+            j = int(bad[0])
+            raise RpcError("joint_limit", f"Joint {j + 1} target {np.degrees(q1[j]):.1f} deg is outside its limits "
+                                          f"{np.degrees(self.lower[j]):.0f}..{np.degrees(self.upper[j]):.0f} deg.")
+        q0, ticket = self._snapshot()
+        return Planned(MOVJ, trajectory.plan_movj(q0, q1, self.vmax, duration=duration, speed=speed), ticket)
+
+    def plan_movl(self, pose_target: np.ndarray, *, duration: float | None = None,
+                  speed: float | None = None, describe: Any = None) -> Planned:
+        """Plan a straight line from the measured joints to an SI pose, checking the whole
+        path, without holding the lock (only for the snapshot); `start` begins it."""
+        q0, ticket = self._snapshot()
+        p0 = np.asarray(self.model.fwd(q0), float)
+        kw = {"describe": describe} if describe else {}
+        plan = trajectory.plan_movl(self.model, q0, p0, pose_target, self.lower, self.upper, self.vmax,
+                                    duration=duration, speed=speed, **kw)
+        return Planned(MOVL, plan, ticket)
+
+    def start(self, planned: Planned, now: float) -> float:
+        """Begin a planned motion at time `now` (read it after planning); returns its duration.
+        Refused, and nothing moves, if the controller changed since the plan's snapshot
+        (see the module's docstring for what answers what)."""
+        with self._lock:
+            self.check_can_move()
+            self._check_idle()
+            if planned.ticket != self._epoch:
+                why = self._interrupt
+                raise RpcError(why.code, f"{why.message} came while this {planned.state} was being planned, "
+                                         "so it was not started; nothing moved.")
+            self._start(planned.state, planned.plan, now)
+            return planned.plan.duration
 
     def stream(self, velocity: np.ndarray, now: float, mode: str = MOVV) -> None:
         """Set or refresh a streamed pose velocity (SI); it lapses after COMMAND_WATCHDOG_S seconds."""
@@ -157,6 +214,7 @@ class Controller:
             if v.shape != (self.model.pose_size,) or not np.all(np.isfinite(v)):
                 raise RpcError("bad_request", f"A velocity needs {self.model.pose_size} finite numbers.")
             if self.state != mode:
+                self._bump(RpcError("busy", f"A {mode}"))
                 self._stream_pose = np.asarray(self.model.fwd(q0), float)
                 self._hold = q0
                 self._last_tick = None
@@ -168,7 +226,7 @@ class Controller:
     def stop(self) -> None:
         """Stop any motion; the arm holds its last reference."""
         with self._lock:
-            self._abort(None)
+            self._cancel(None, "A stop")
 
     def wait(self, timeout: float | None) -> bool:
         """Block until no planned motion runs; False on timeout (the motion keeps running)."""
@@ -231,7 +289,18 @@ class Controller:
         return Reference(self._hold.tolist(), [0.0] * self.n)
 
     # --- internals ----------------------------------------------------------------------
+    def _bump(self, what: RpcError) -> None:
+        """Something happened that a motion being planned must not outlive (see start)."""
+        self._epoch += 1
+        self._interrupt = what
+
+    def _cancel(self, why: RpcError | None, what: str) -> None:
+        """Abort the running motion (if any) and the motions being planned."""
+        self._bump(RpcError(why.code if why is not None else "busy", what))
+        self._abort(why)
+
     def _start(self, state: str, plan: trajectory.JointPlan, now: float) -> None:
+        self._bump(RpcError("busy", f"A {state}"))
         self.outcome = None
         self._plan, self._t0, self.state = plan, now, state
         self._hold = plan.q_at(plan.duration)

@@ -7,8 +7,8 @@ Request of RPC verb `pointer` (the web UI sends it at about 20 Hz; each one keep
 alive for 200 ms):
   deadman   bool   required; False stops the arm at once
   direction str    "forward" | "hold" | "backward" (default "hold")
-  yaw       float  azimuth rate, deg/s, positive turns the arm counter-clockwise (default 0)
-  pitch     float  device pitch, deg: the wanted rot(y') of the tool (default: keep)
+  yaw       float  azimuth rate, deg/s, positive turns the arm counter-clockwise (default 0, at most 360)
+  pitch     float  device pitch, deg: the wanted rot(y') of the tool (default: keep; -180..180)
   speed     float  translation speed along the tool axis, m/s (default 0.05, max 0.1)
 """
 
@@ -19,14 +19,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from asibot.errors import RpcError
+from . import requests
 
 #: Default translation speed, m/s (trajectoryRefSpeed, docs/asibot-conventions.md "Control states").
-DEFAULT_SPEED = 0.05
-MAX_SPEED = 0.1
+DEFAULT_SPEED = requests.POINTER_SPEED
+MAX_SPEED = requests.MAX_POINTER_SPEED
 #: How fast the tool pitch follows the device, 1/s (reaches it in about half a second).
 PITCH_GAIN = 2.0
-DIRECTIONS = {"forward": 1.0, "hold": 0.0, "backward": -1.0}
+DIRECTIONS = dict(zip(requests.POINTER_DIRECTIONS, (1.0, 0.0, -1.0)))
 
 
 @dataclass
@@ -39,23 +39,9 @@ class PointerInput:
 
     @classmethod
     def from_request(cls, req: dict) -> "PointerInput":
-        """Validate a request; bad input raises bad_request with the field name."""
-        if not isinstance(req.get("deadman"), bool):
-            raise RpcError("bad_request", "pointer needs 'deadman': true or false.")
-        direction = req.get("direction", "hold")
-        if direction not in DIRECTIONS:
-            raise RpcError("bad_request", f"'direction' must be forward, hold or backward; got {direction!r}.")
-        out = cls(deadman=req["deadman"], direction=direction)
-        for name in ("yaw", "pitch", "speed"):
-            if req.get(name) is None:
-                continue
-            value = req[name]
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise RpcError("bad_request", f"'{name}' must be a finite number; got {value!r}.")
-            setattr(out, name, float(value))
-        if not 0.0 < out.speed <= MAX_SPEED:
-            raise RpcError("bad_request", f"'speed' must be in (0, {MAX_SPEED}] m/s; got {out.speed}.")
-        return out
+        """Validate a request (the `pointer` entry of asibot.kinematics.requests, like every
+        verb); bad input raises bad_request naming the field and its allowed range."""
+        return cls(**vars(requests.POINTER.parse("pointer", req)))
 
 
 def pointer_velocity(pose: np.ndarray, cmd: PointerInput) -> np.ndarray:

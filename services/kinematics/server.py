@@ -4,12 +4,16 @@ sends joint references with velocity feed-forward on arm/command, and cart/state
 User-facing points, joints and tool frames are in the seed's units (m and deg,
 docs/asibot-conventions.md "Kinematics") and are converted to SI here, at the edge; the
 Controller and the bus messages are SI only.
+
+Every request is checked by one table, asibot.kinematics.requests: the server serves exactly
+its verbs, and each handler receives the checked arguments (a namespace), never the raw map.
+A movj or movl is planned without holding the controller (see asibot.kinematics.controller),
+so `stop`, `stat` and cart/state are answered while a long path is checked.
 """
 
 from __future__ import annotations
 
 import logging
-import math
 import threading
 import time
 from typing import Any, Callable
@@ -22,43 +26,30 @@ from asibot.messages import ArmCommand, ArmState, CartState, EStop, Event, Gripp
 from asibot.runtime import Service
 from asibot.timing import Ticker
 
+from . import requests
 from .controller import MOVV, POINTER, Controller
 from .pointer import PointerInput, pointer_velocity
+from .requests import MAX_WAIT
 
 log = logging.getLogger(__name__)
 
 #: cart/state rate, Hz (the web UI needs 20 Hz or more; the seed streamed FK every 20 ms,
 #: docs/asibot-conventions.md "Control states").
 STATE_RATE = 50.0
-#: Longest a single `wait` RPC blocks; the client loops for longer waits.
-MAX_WAIT = 10.0
-#: Longest `act` waits for the fingers to stop, s (a full stroke takes about 1 s).
-GRIP_TIMEOUT = 3.0
-#: The fingers have stopped when they moved less than this (m) during GRIP_STILL seconds.
+#: Longest `act` waits for the fingers to start moving after its command, s: a loaded
+#: machine or a slow driver may take a while to pass the command on.
+GRIP_START_TIMEOUT = 1.5
+#: Longest `act` waits in all for the fingers to move and stop, s (a full stroke takes about
+#: 1 s); below the client's 5 s call timeout, so the caller gets the server's sentence.
+GRIP_TIMEOUT = 4.0
+#: The fingers move when they moved more than this (m) from where they were at the command,
+#: and have stopped when they moved less than this during GRIP_STILL seconds.
 GRIP_STILL_M, GRIP_STILL = 0.0005, 0.3
+#: The fingers are at their target within this, m.
+GRIP_AT_TARGET = 0.002
 #: How long a request waits for the arm driver to show up before refusing, s: just after
 #: `asibot up` the driver's first state may be a moment behind the first user command.
 DRIVER_GRACE = 2.0
-#: Verbs that need a live driver and its measured joints.
-NEEDS_DRIVER = ("stat", "movj", "movl", "movv", "relj", "home", "pointer")
-
-
-def numbers(req: dict, name: str, size: int) -> np.ndarray:
-    """A list of `size` finite numbers from the request, or bad_request naming the field."""
-    value = req.get(name)
-    if not isinstance(value, (list, tuple)) or len(value) != size or not all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value):
-        raise RpcError("bad_request", f"'{name}' must be a list of {size} finite numbers; got {value!r}.")
-    return np.asarray(value, float)
-
-
-def optional_number(req: dict, name: str) -> float | None:
-    value = req.get(name)
-    if value is None:
-        return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-        raise RpcError("bad_request", f"'{name}' must be a positive number; got {value!r}.")
-    return float(value)
 
 
 class KinematicsServer(Service):
@@ -84,21 +75,25 @@ class KinematicsServer(Service):
         self._grip_changed = threading.Condition()
         bus.subscribe(keys.gripper_state(robot), GripperState, self._on_gripper)
         bus.watch(keys.driver_alive(robot), self._on_driver)
-        verbs = {"stat": self.stat, "inv": self.inv, "fwd": self.fwd, "movj": self.movj, "movl": self.movl,
-                 "movv": self.movv, "relj": self.relj, "stop": self.stop, "wait": self.wait,
-                 "tool": self.tool, "act": self.act, "home": self.home, "pointer": self.pointer}
-        for verb, handler in verbs.items():
-            bus.serve(keys.cart_rpc(robot, verb), self._after_driver(handler) if verb in NEEDS_DRIVER else handler)
+        # The table of requests is the list of verbs: each is served by the method of its name,
+        # which receives the checked arguments.
+        self.verbs = requests.verbs(self.n)
+        for verb, spec in self.verbs.items():
+            bus.serve(keys.cart_rpc(robot, verb), self._handler(verb, spec, getattr(self, verb)))
         bus.announce(keys.controller_alive(robot))
         self._loop = threading.Thread(target=self._run, name="control-loop", daemon=True)
         self._loop.start()
 
-    def _after_driver(self, handler: Callable[[dict], dict]) -> Callable[[dict], dict]:
+    def _handler(self, verb: str, spec: requests.Verb, method: Callable[[Any], dict]) -> Callable[[dict], dict]:
+        """The bus handler of `verb`: check the request, wait for the driver if the verb
+        needs it, then call `method(args)`."""
         def run(req: dict) -> dict:
-            deadline = time.monotonic() + DRIVER_GRACE
-            while not (self.ctl.driver_alive and self.ctl.q is not None) and time.monotonic() < deadline:
-                time.sleep(0.02)
-            return handler(req)
+            args = spec.parse(verb, req)
+            if spec.needs_driver:
+                deadline = time.monotonic() + DRIVER_GRACE
+                while not (self.ctl.driver_alive and self.ctl.q is not None) and time.monotonic() < deadline:
+                    time.sleep(0.02)
+            return method(args)
         return run
 
     # --- bus inputs ---------------------------------------------------------------------
@@ -141,14 +136,11 @@ class KinematicsServer(Service):
                 log.exception("control tick failed; holding")
 
     # --- unit conversion at the edge ----------------------------------------------------
-    def _point_in(self, req: dict, name: str = "point") -> np.ndarray:
-        return np.asarray(self.model.from_user_point(numbers(req, name, self.model.pose_size)), float)
+    def _point_in(self, point: np.ndarray) -> np.ndarray:
+        return np.asarray(self.model.from_user_point(point), float)
 
     def _point_out(self, pose: np.ndarray) -> list[float]:
         return [float(v) for v in self.model.to_user_point(np.asarray(pose, float))]
-
-    def _joints_in(self, req: dict, name: str = "joints") -> np.ndarray:
-        return np.radians(numbers(req, name, self.n))
 
     def _describe(self, pose: np.ndarray) -> str:
         return "[" + ", ".join(f"{v:.3f}" for v in self._point_out(pose)) + "]"
@@ -159,59 +151,56 @@ class KinematicsServer(Service):
                                           f"{self.robot}.")
         return self.ctl.q.copy()
 
-    # --- verbs --------------------------------------------------------------------------
-    def stat(self, req: dict) -> dict:
+    # --- verbs: each takes the arguments checked by its entry in requests.verbs ----------
+    def stat(self, a: Any) -> dict:
         q = self._measured()
         return {"state": self.ctl.state, "point": self._point_out(self.model.fwd(q)),
                 "joints": np.degrees(q).tolist(), "estop": self.ctl.estop, "fault": self.ctl.fault}
 
-    def inv(self, req: dict) -> dict:
-        pose = self._point_in(req)
+    def inv(self, a: Any) -> dict:
         guess = self.ctl.q if self.ctl.q is not None else np.zeros(self.n)
-        return {"joints": np.degrees(self.model.inv(pose, guess)).tolist()}
+        return {"joints": np.degrees(self.model.inv(self._point_in(a.point), guess)).tolist()}
 
-    def fwd(self, req: dict) -> dict:
-        return {"point": self._point_out(self.model.fwd(self._joints_in(req)))}
+    def fwd(self, a: Any) -> dict:
+        return {"point": self._point_out(self.model.fwd(np.radians(a.joints)))}
 
-    def movj(self, req: dict) -> dict:
+    def movj(self, a: Any) -> dict:
         """Joint-space move to a point (via IK) or to joints (deg)."""
-        if ("point" in req) == ("joints" in req):
+        if (a.point is None) == (a.joints is None):
             raise RpcError("bad_request", "movj needs either 'point' [x, y, z, rot(y'), rot(z'')] or 'joints' (deg).")
-        if "point" in req:
-            pose = self._point_in(req)
-            q = np.asarray(self.model.inv(pose, self._measured()), float)
+        if a.point is not None:
+            q = np.asarray(self.model.inv(self._point_in(a.point), self._measured()), float)
         else:
-            q = self._joints_in(req)
-        return self._movj_to(q, req)
+            q = np.radians(a.joints)
+        return self._movj_to(q, a)
 
-    def _movj_to(self, q: np.ndarray, req: dict) -> dict:
-        T = self.ctl.movj(q, self.clock(), duration=optional_number(req, "duration"),
-                          speed=optional_number(req, "speed"))
+    def _movj_to(self, q: np.ndarray, a: Any) -> dict:
+        return self._start(self.ctl.plan_movj(q, duration=a.duration, speed=a.speed))
+
+    def _start(self, planned: Any) -> dict:
+        """Start a motion planned without the controller's lock, at the time it starts."""
+        T = self.ctl.start(planned, self.clock())
         self._send()
         return {"duration": T}
 
-    def relj(self, req: dict) -> dict:
-        return self._movj_to(self._measured() + self._joints_in(req), req)
+    def relj(self, a: Any) -> dict:
+        return self._movj_to(self._measured() + np.radians(a.joints), a)
 
-    def home(self, req: dict) -> dict:
-        return self._movj_to(np.asarray(self.spec.home, float), req)
+    def home(self, a: Any) -> dict:
+        return self._movj_to(np.asarray(self.spec.home, float), a)
 
-    def movl(self, req: dict) -> dict:
-        pose = self._point_in(req)
-        T = self.ctl.movl(pose, self.clock(), duration=optional_number(req, "duration"),
-                          speed=optional_number(req, "speed"), describe=self._describe)
-        self._send()
-        return {"duration": T}
+    def movl(self, a: Any) -> dict:
+        return self._start(self.ctl.plan_movl(self._point_in(a.point), duration=a.duration, speed=a.speed,
+                                              describe=self._describe))
 
-    def movv(self, req: dict) -> dict:
+    def movv(self, a: Any) -> dict:
         """Stream a velocity in user units (m/s, deg/s); repeat within 200 ms to keep moving."""
-        v = np.asarray(self.model.from_user_point(numbers(req, "velocity", self.model.pose_size)), float)
-        self.ctl.stream(v, self.clock(), MOVV)
+        self.ctl.stream(np.asarray(self.model.from_user_point(a.velocity), float), self.clock(), MOVV)
         self._send()
         return {}
 
-    def pointer(self, req: dict) -> dict:
-        cmd = PointerInput.from_request(req)
+    def pointer(self, a: Any) -> dict:
+        cmd = PointerInput(**vars(a))
         if not cmd.deadman:
             if self.ctl.state == POINTER:
                 self.ctl.stop()
@@ -224,45 +213,35 @@ class KinematicsServer(Service):
         self._send()
         return {"state": self.ctl.state}
 
-    def stop(self, req: dict) -> dict:
+    def stop(self, a: Any) -> dict:
         self.ctl.stop()
         self._send()
         return {}
 
-    def wait(self, req: dict) -> dict:
+    def wait(self, a: Any) -> dict:
         """Wait for the planned motion (movj/movl) to end, at most MAX_WAIT s per call.
 
         Replies done=False if it is still running; raises the reason if it ended early.
         """
-        timeout = optional_number(req, "timeout") or MAX_WAIT
-        done = self.ctl.wait(min(timeout, MAX_WAIT))
+        done = self.ctl.wait(min(a.timeout, MAX_WAIT))
         if done and self.ctl.outcome is not None:
             raise self.ctl.outcome
         return {"done": done, "state": self.ctl.state}
 
-    def tool(self, req: dict) -> dict:
+    def tool(self, a: Any) -> dict:
         """Attach a tool frame (the seed's `tool`): 'tool' is [x, y, z, rx, ry, rz] in m and deg,
         the offset and rotation vector (axis times angle) of the tool point from the flange
         (the ASIBOT) or the approach frame (other arms). Absent, null or all zeros removes it."""
-        tool = req.get("tool")
-        if tool is None:
+        if a.tool is None:
             self.model.set_tool(None)
-            return {}
-        try:
-            tool = numbers(req, "tool", 6)  # user units, like points
-        except RpcError:
-            raise RpcError("bad_request", "'tool' must be [x, y, z, rx, ry, rz] in m and deg (6 finite numbers), "
-                                          f"or null to remove it; got {req['tool']!r}.") from None
-        self.model.set_tool(tool[:3].tolist() + np.radians(tool[3:]).tolist())
+        else:
+            self.model.set_tool(a.tool[:3].tolist() + np.radians(a.tool[3:]).tolist())
         return {}
 
-    def act(self, req: dict) -> dict:
+    def act(self, a: Any) -> dict:
         """Gripper: action "open" or "close" (the seed's acog/accg). Returns once the fingers
-        stop, at the end of their stroke or on an object, with the opening and whether the
-        gripper holds something, so a program can check its grasp."""
-        action = req.get("action")
-        if action not in ("open", "close"):
-            raise RpcError("bad_request", f"'action' must be open or close; got {action!r}.")
+        have moved and stopped, at the end of their stroke or on an object, with the opening
+        and whether the gripper holds something, so a program can check its grasp."""
         if self.ctl.estop:
             raise RpcError("estop", "The emergency stop is engaged; release it before using the gripper.")
         with self._grip_changed:
@@ -271,25 +250,50 @@ class KinematicsServer(Service):
             if self._grip is None:
                 raise RpcError("unavailable", f"No gripper reports for {self.robot}: its driver has no "
                                               "gripper, or is not running.")
-        opening = float(self.spec.gripper_max_opening) if action == "open" else 0.0
+            before = self._grip
+        opening = float(self.spec.gripper_max_opening) if a.action == "open" else 0.0
         self.grip_pub.put(GripperCommand(opening=opening))
-        state = self._gripper_settled(opening)
+        state = self._gripper_settled(opening, before)
         return {"opening": state.opening, "holding": state.holding}
 
-    def _gripper_settled(self, target: float) -> GripperState:
-        """The gripper state once the fingers reach `target` or stop moving (on an object)."""
+    def _gripper_settled(self, target: float, before: GripperState) -> GripperState:
+        """The gripper state once the fingers, commanded to `target`, have started to move and
+        stopped again (at the target or on an object). Not a fixed delay: a loaded machine or a
+        slow driver may start the fingers late, and a report that they have not moved yet
+        must not pass for "stopped". Answers at once when they are at the target already, or
+        closing while they hold something. Refuses with `timeout` when they do not start
+        within GRIP_START_TIMEOUT or have not stopped GRIP_TIMEOUT after the command."""
+        closing = target < before.opening
         start = time.monotonic()
+        moved_at: float | None = None
         window: list[tuple[float, float]] = []
         with self._grip_changed:
             while True:
                 self._grip_changed.wait(0.05)
                 now, state = time.monotonic(), self._grip
+                if abs(state.opening - target) < GRIP_AT_TARGET:
+                    return state
+                if self.ctl.estop:  # the driver stops the fingers and refuses their commands
+                    raise RpcError("estop", "The emergency stop was engaged while the gripper moved "
+                                            f"(opening {state.opening:.3f} m); release it, then try again.")
+                if moved_at is None:
+                    if closing and state.holding:
+                        return state
+                    # Towards the target: fingers still finishing an earlier stroke have not started.
+                    if (before.opening - state.opening if closing else state.opening - before.opening) > GRIP_STILL_M:
+                        moved_at = now
+                    elif now - start > GRIP_START_TIMEOUT:
+                        raise RpcError("timeout", f"The gripper did not start to move within {GRIP_START_TIMEOUT:g} s "
+                                                  f"of the command (opening {state.opening:.3f} m); check its driver, "
+                                                  "then try again.")
+                    continue
                 window = [(t, o) for t, o in window if now - t <= GRIP_STILL] + [(now, state.opening)]
                 spread = max(o for _, o in window) - min(o for _, o in window)
-                if abs(state.opening - target) < 0.002 or now - start > GRIP_TIMEOUT:
+                if now - moved_at > GRIP_STILL and spread < GRIP_STILL_M:
                     return state
-                if now - start > GRIP_STILL and spread < GRIP_STILL_M:
-                    return state
+                if now - start > GRIP_TIMEOUT:
+                    raise RpcError("timeout", f"The gripper was still moving {GRIP_TIMEOUT:g} s after the command "
+                                              f"(opening {state.opening:.3f} m); check its driver, then try again.")
 
     # --- lifecycle ----------------------------------------------------------------------
     def health(self) -> dict:

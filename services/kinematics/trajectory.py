@@ -24,6 +24,9 @@ DEFAULT_JOINT_SPEED_FRACTION = 10.0 / 25.0
 CUBIC_PEAK = 1.5
 #: movl path check resolution: one sample per 5 mm or per 1 % of the path, whichever is finer.
 CHECK_STEP = 0.005
+#: Most samples a movl path check takes (a straight line across a 1.4 m arm's workspace with
+#: a full turn of the tool is about 1,500): beyond it the move is refused, not sampled.
+MAX_PATH_SAMPLES = 5000
 
 
 class Profile(Protocol):
@@ -151,7 +154,9 @@ def plan_movl(model: Kinematics, q0: np.ndarray, p0: np.ndarray, p1: np.ndarray,
               describe: Callable[[np.ndarray], str] = lambda p: str(np.round(p, 3).tolist())) -> JointPlan:
     """Straight Cartesian line p0 -> p1 (SI poses), checked end to end before any motion.
 
-    The path is sampled, each sample solved by IK from the previous solution (model.inv_path,
+    The end point is checked for reach first (an out-of-reach target is refused at once,
+    with the solver's sentence); a line too long to sample (MAX_PATH_SAMPLES) is refused.
+    Then the path is sampled, each sample solved by IK from the previous solution (model.inv_path,
     one unit conversion for the whole path); the first unreachable sample, joint-limit
     violation or configuration jump refuses the whole move with the percentage of the path
     where it happens. `speed` is in m/s. The duration is stretched so no joint exceeds its max
@@ -164,7 +169,18 @@ def plan_movl(model: Kinematics, q0: np.ndarray, p0: np.ndarray, p1: np.ndarray,
         raise RpcError("bad_request", f"speed must be a positive number of m/s; got {speed}.")
     if duration is not None and not (np.isfinite(duration) and duration > 0):
         raise RpcError("bad_request", f"duration must be a positive number of seconds; got {duration}.")
+    # The end point first: one IK, not a path of samples, says that a point is out of reach
+    # (a movl to x = 1e5 m would otherwise sample 2e7 poses before refusing).
+    _, failure = model.inv_path(p1[None, :], np.asarray(q0, float))
+    if failure is not None:
+        raise failure
+    if not (np.isfinite(lin) and np.isfinite(ang)):
+        raise RpcError("bad_request", f"The line from {describe(p0)} to {describe(p1)} is not finite.")
     n = int(max(100, np.ceil(lin / CHECK_STEP), np.ceil(ang / np.radians(0.5))))
+    if n > MAX_PATH_SAMPLES:
+        raise RpcError("bad_request", f"The line from {describe(p0)} to {describe(p1)} is {lin:.3g} m long and turns "
+                                      f"the tool {np.degrees(ang):.0f} deg: too long to check in steps of 5 mm and "
+                                      f"0.5 deg (at most {MAX_PATH_SAMPLES} steps); split it with intermediate points.")
     s = np.linspace(0.0, 1.0, n + 1)
     poses = line_pose(p0[None, :], p1[None, :], s[:, None])
     qs, failure = model.inv_path(poses, np.asarray(q0, float))

@@ -5,6 +5,7 @@ the time on start-up); each test starts from a stopped controller and the same j
 that destroy the setup build their own (`fresh`).
 """
 
+import threading
 from types import SimpleNamespace
 
 import numpy as np
@@ -22,13 +23,37 @@ ROBOT = "asibot-test"
 START = np.radians([0.0, 5.0, 5.0, 5.0, 0.0])
 
 
-def build(robot: str) -> SimpleNamespace:
+class Sent:
+    """The server's arm-command publisher, counting what it sent."""
+
+    def __init__(self, pub) -> None:
+        self.pub, self.count, self._lock = pub, 0, threading.Lock()
+
+    def put(self, msg) -> None:
+        self.pub.put(msg)
+        with self._lock:
+            self.count += 1
+
+
+def build(robot: str, model=None) -> SimpleNamespace:
+    """Driver, server (with `model`, default the real ASIBOT one) and client for `robot`.
+    `server.cmd_pub.count` is how many arm commands the server sent."""
     driver = IdealDriver(robot, asibot_spec())
     driver.set_joints(START)
     bus = Bus("kinematics")
-    server = KinematicsServer(bus, robot, asibot_model(), asibot_spec(), rate=100.0)
+    server = KinematicsServer(bus, robot, model or asibot_model(), asibot_spec(), rate=100.0)
+    server.cmd_pub = Sent(server.cmd_pub)
     wait_until(lambda: server.ctl.driver_alive and server.ctl.q is not None, timeout=5.0)
     return SimpleNamespace(robot=robot, driver=driver, bus=bus, server=server, client=CartesianClient(robot))
+
+
+def quiet(s: SimpleNamespace) -> None:
+    """Stop the controller, drop a hold it has not sent yet, and wait until the driver has
+    every command it did send: one still on its way (the last reference of a motion that
+    just ended) would move the arm after the next test puts it at START."""
+    s.server.ctl.stop()
+    wait_until(lambda: s.server.ctl.tick(0.0) is None, timeout=1.0)
+    wait_until(lambda: len(s.driver.commands) >= s.server.cmd_pub.count, timeout=2.0)
 
 
 def teardown(s: SimpleNamespace) -> None:
@@ -48,8 +73,7 @@ def shared(request):
 
 @pytest.fixture
 def client(shared):
-    shared.server.ctl.stop()
-    wait_until(lambda: shared.server.ctl.tick(0.0) is None, timeout=1.0)
+    quiet(shared)
     shared.driver.set_joints(START)
     wait_until(lambda: np.allclose(shared.server.ctl.q, START, atol=1e-9), timeout=2.0)
     yield shared.client

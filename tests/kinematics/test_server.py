@@ -1,5 +1,6 @@
 """The control server against the ideal driver through real Zenoh RPC."""
 
+import math
 import os
 import subprocess
 import sys
@@ -59,11 +60,27 @@ def test_movl_moves_in_a_straight_line(client):
     assert np.allclose(client.stat()[:3], p1[:3], atol=0.003)
 
 
-def test_movl_unreachable_is_refused_with_percentage_and_nothing_moves(client, driver):
+def test_movl_unreachable_end_point_is_refused_and_nothing_moves(client, driver):
     before = client.state()["joints"]
     with pytest.raises(RpcError) as err:
         client.movl([0.3, 0.0, 1.8, 0.0, 0.0])
-    assert err.value.code == "unreachable" and "% of the path" in str(err.value)
+    assert err.value.code == "unreachable" and "[0.3, 0, 1.8, 0, 0]" in str(err.value)
+    time.sleep(0.1)
+    assert np.allclose(client.state()["joints"], before, atol=1e-6)
+
+
+def test_movl_through_an_unreachable_middle_is_refused_with_percentage_and_nothing_moves(client, driver):
+    target = client.inv([0.5, 0.0, 1.2, 0.0, 0.0])
+    driver.set_joints(np.radians(target))
+
+    def arrived():
+        joints = client.state()["joints"]
+        return joints if np.allclose(joints, target, atol=1e-6) else None
+
+    before = wait_until(arrived)
+    with pytest.raises(RpcError) as err:  # both ends reachable, the line crosses the base axis
+        client.movl([-0.5, 0.001, 1.2, 0.0, 0.0])
+    assert err.value.code == "unreachable" and "50 % of the path" in str(err.value)
     time.sleep(0.1)
     assert np.allclose(client.state()["joints"], before, atol=1e-6)
 
@@ -186,6 +203,42 @@ def test_closing_on_an_object_reports_the_grasp(client, driver):
     finally:
         driver.object_width = None
         client.grip(close=False)
+
+
+@pytest.fixture
+def late_gripper(client, driver):
+    """The fingers start only 0.6 s after each command (longer than the 0.3 s the old `act`
+    took for "stopped"), as under load; open and undelayed again after."""
+    driver.object_width = None
+    client.grip(close=False)
+    driver.gripper_start_delay = 0.6
+    yield driver
+    driver.gripper_start_delay = 0.0
+    driver.object_width = None
+    client.grip(close=False)
+
+
+def test_act_waits_for_fingers_that_start_late(client, late_gripper):
+    closed = client.act("close")   # the old act answered "stopped" at 0.08 m, before they moved
+    assert closed["opening"] == pytest.approx(0.0, abs=0.002) and closed["holding"] is False
+    assert late_gripper.gripper == pytest.approx(0.0, abs=0.002)
+
+
+def test_grip_on_an_object_with_late_fingers_reports_the_grasp(client, late_gripper):
+    late_gripper.object_width = 0.066
+    assert client.grip() is True   # the old act answered False before the fingers moved
+    assert late_gripper.gripper == pytest.approx(0.066, abs=1e-6)
+    assert client.grip() is True   # closing again while holding answers at once
+
+
+def test_act_answers_a_sentence_when_the_fingers_never_start(client, late_gripper, monkeypatch):
+    from asibot.kinematics import server as server_module
+    monkeypatch.setattr(server_module, "GRIP_START_TIMEOUT", 0.5)
+    late_gripper.gripper_start_delay = math.inf
+    with pytest.raises(RpcError) as err:
+        client.act("close")
+    assert err.value.code == "timeout" and "did not start to move" in err.value.message
+    assert late_gripper.gripper == pytest.approx(0.08, abs=1e-6)
 
 
 @pytest.mark.slow

@@ -69,15 +69,63 @@ def test_movl_follows_a_straight_line():
     assert np.allclose(plan.qdot_at(0.0), 0.0)
 
 
-def test_movl_unreachable_midway_says_where_before_moving():
-    # rising from a low horizontal reach while turning the tool up: the wrist leaves the reach at ~85 %
+class CountingModel:
+    """The real model, counting the poses its path checks solve."""
+
+    def __init__(self, fail_after: int | None = None) -> None:
+        self.model, self.solved, self.fail_after = asibot_model(), 0, fail_after
+
+    def __getattr__(self, name):
+        return getattr(self.model, name)
+
+    def inv_path(self, poses, q0):
+        self.solved += len(poses)
+        qs, failure = self.model.inv_path(poses, q0)
+        if self.fail_after is not None and len(poses) > self.fail_after:  # an IK failure midway
+            return qs[:self.fail_after], RpcError("unreachable", "no solution here")
+        return qs, failure
+
+
+def test_movl_to_an_unreachable_end_is_refused_before_sampling_the_path():
+    # the end point's wrist is beyond reach: one IK says so, no path of samples is solved
+    spec, model = asibot_spec(), CountingModel()
     p0, p1 = np.array([0.9, 0.0, 0.3, math.pi / 2, 0.0]), np.array([0.85, 0.0, 0.9, 0.0, 0.0])
+    q0 = model.inv(p0, np.array([0, 0.1, 0.5, 0.5, 0]))
+    for end in (p1, np.array([1e5, 0.0, 1.0, 0.0, 0.0])):
+        with pytest.raises(RpcError) as err:
+            tr.plan_movl(model, q0, p0, end, spec.lower, spec.upper, spec.max_velocity)
+        assert err.value.code == "unreachable" and "beyond" in err.value.message
+    assert model.solved == 2
+
+
+def test_movl_through_a_singularity_says_where_before_moving():
+    # both ends reachable; the straight line crosses the base axis, where the azimuth flips
     with pytest.raises(RpcError) as err:
-        _line(p0, p1)
+        _line(np.array([0.5, 0.0, 1.2, 0.0, 0.0]), np.array([-0.5, 0.001, 1.2, 0.0, 0.0]))
+    assert err.value.code == "unreachable" and "at 50 % of the path" in err.value.message
+
+
+def test_movl_unreachable_midway_says_where_before_moving():
+    spec, model = asibot_spec(), CountingModel(fail_after=60)
+    p0, p1 = np.array([0.5, 0.2, 0.7, 1.5, 0.0]), np.array([0.6, -0.2, 0.9, 1.5, 0.3])
+    q0 = model.inv(p0, np.array([0, 0.1, 0.5, 0.5, 0]))
+    with pytest.raises(RpcError) as err:
+        tr.plan_movl(model, q0, p0, p1, spec.lower, spec.upper, spec.max_velocity)
     assert err.value.code == "unreachable"
     assert "The point is unreachable at " in err.value.message and "% of the path" in err.value.message
     pct = int(err.value.message.split("at ")[1].split(" %")[0])
-    assert 50 < pct < 100
+    assert 0 < pct < 100
+
+
+def test_a_line_too_long_to_check_is_refused():
+    # ten turns of the tool about its axis: reachable at both ends, 7,200 steps of 0.5 deg
+    spec, model = asibot_spec(), CountingModel()
+    p0 = np.array([0.5, 0.2, 0.7, 1.5, 0.0])
+    q0 = model.inv(p0, np.array([0, 0.1, 0.5, 0.5, 0]))
+    with pytest.raises(RpcError) as err:
+        tr.plan_movl(model, q0, p0, p0 + [0, 0, 0, 0, 20 * math.pi], spec.lower, spec.upper, spec.max_velocity)
+    assert err.value.code == "bad_request" and "too long" in err.value.message
+    assert model.solved == 1
 
 
 def test_movl_into_the_stretched_home_pose_takes_seconds_within_joint_speeds():
