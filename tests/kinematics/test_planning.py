@@ -23,7 +23,7 @@ from asibot.testing import wait_until
 
 from .conftest import ROBOT, build, teardown
 from .test_controller import Q0, ready
-from .robot_under_test import asibot_model, asibot_spec
+from .robot_under_test import asibot_model
 
 #: Generous bound for anything that must answer at once (a loaded CI machine), s.
 PROMPT = 5.0
