@@ -72,7 +72,8 @@ def cmd_up(args: argparse.Namespace) -> int:
     sup = Supervisor(services, endpoint, root=path.resolve().parent)
     names = ", ".join(s.name for s in services)
     sup.say("asibot", f"profile {args.profile}: {names}")
-    sup.say("asibot", f"router {endpoint}; recordings in {path.resolve().parent / 'recordings'}; Ctrl-C stops")
+    recordings = path.resolve().parent / os.environ.get("ASIBOT_RECORDINGS", "recordings")  # as compose.yaml
+    sup.say("asibot", f"router {endpoint}; recordings in {recordings}; Ctrl-C stops")
 
     def on_event(name: str, what: str) -> None:
         spec = next(s for s in services if s.name == name)
@@ -360,6 +361,9 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
+    except BrokenPipeError:  # `asibot recordings -v | head`: the reader has all it wanted
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except AsibotError as exc:
         print(f"asibot {args.command}: {exc}", file=sys.stderr)
         return 2

@@ -153,7 +153,7 @@ def test_asibot_up_status_and_ctrl_c(tmp_path):
         up.send_signal(signal.SIGINT)
         assert up.wait(10) == 0
     text = "".join(lines)
-    assert "recorder | " in text and "asibot   | stopped" in text
+    assert "recorder | " in text and "asibot   | stopped" in text and f"recordings in {elsewhere}" in text
     recordings = list(elsewhere.glob("*.mcap"))
     assert len(recordings) == 1 and not (tmp_path / "recordings").exists()
     listing = subprocess.run([sys.executable, "-m", "asibot.cli", "recordings"], cwd=tmp_path,
