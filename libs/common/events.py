@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 import threading
 import time
 from dataclasses import dataclass
@@ -54,6 +55,15 @@ class _Burst:
     held: int = 0             # events held back in it
     newest: Event | None = None
     timer: threading.Timer | None = None
+
+
+_HELD = re.compile(r"\((\d+) more [^()]+ in the last [^()]+\)\.$")
+
+
+def stands_for(text: str) -> int:
+    """How many events one throttled event's text stands for: itself, plus the count it carries."""
+    held = _HELD.search(text)
+    return 1 + (int(held.group(1)) if held else 0)
 
 
 class EventThrottle:

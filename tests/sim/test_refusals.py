@@ -7,7 +7,6 @@ The sim service in this process (real time, no cameras) on the in-memory bus."""
 from __future__ import annotations
 
 import math
-import re
 import time
 
 import pytest
@@ -15,6 +14,7 @@ import pytest
 from asibot import keys
 from asibot import messages as m
 from asibot.bus import Bus
+from asibot.events import stands_for
 from asibot.sim.service import Options, SimService
 from asibot.sim.simulation import Simulation
 from asibot.testing import Inbox, wait_until
@@ -122,11 +122,7 @@ def test_a_burst_of_300_bad_commands_gives_one_event_a_second_per_reason(sim):
     sent_in = time.monotonic() - t0
 
     def accounted() -> int:
-        n = 0
-        for e in refusals(events):
-            more = re.search(r"\((\d+) more refused commands in the last second\)", e.text)
-            n += 1 + (int(more.group(1)) if more else 0)
-        return n
+        return sum(stands_for(e.text) for e in refusals(events))
 
     wait_until(lambda: accounted() >= 300, 10, message=f"refusals accounted for: {accounted()}")
     got = refusals(events)
