@@ -15,7 +15,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from asibot.events import quantity
+from asibot.events import CommandRefused, quantity
 from asibot.messages import COMMAND_WATCHDOG_S, ArmCommand
 
 FEEDFORWARD_HORIZON_S = 0.05
@@ -37,13 +37,10 @@ class CommandRejected(ValueError):
     reason = "state"
 
 
-class BadCommand(CommandRejected):
+class BadCommand(CommandRejected, CommandRefused):
     """A command with a value the robot must not be sent (beyond a limit, not finite, the wrong
-    size): refused whole, never clipped. `reason` is a short key for rate-limiting the refusals."""
-
-    def __init__(self, reason: str, sentence: str) -> None:
-        super().__init__(sentence)
-        self.reason = reason
+    size): refused whole, never clipped, like the drivers' CommandRefused (its `reason` keys
+    the rate-limiting of the refusals)."""
 
 
 @dataclass

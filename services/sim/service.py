@@ -20,7 +20,7 @@ from asibot import keys
 from asibot import messages as m
 from asibot.bus import Bus
 from asibot.errors import MessageError, RpcError
-from asibot.events import EventThrottle
+from asibot.events import EventThrottle, refusal_reason
 from asibot.runtime import Service
 from asibot.sim import viewer
 from asibot.sim.arm import BadCommand, CommandRejected, Notice
@@ -106,8 +106,7 @@ class SimService(Service):
            "cmd_vel": "Base command refused, the base keeps its previous motion"}
 
     def _malformed(self, topic: str, key: str, exc: MessageError) -> None:
-        reason = "not_finite" if "not finite" in exc.problem else "malformed"
-        self._reject(topic, reason, f"{self.WHO[topic]}: {exc}")
+        self._reject(topic, refusal_reason(exc), f"{self.WHO[topic]}: {exc}")
 
     def _reject(self, topic: str, reason: str, text: str) -> None:
         self._commands_rejected += 1

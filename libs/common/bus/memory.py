@@ -145,15 +145,13 @@ def network(name: str) -> Network:
 class _Declared:
     """Removes one declaration from its network's table when closed."""
 
-    def __init__(self, table: dict, ident: int, channel: Channel | None = None,
-                 lock: threading.Lock | None = None) -> None:
+    def __init__(self, table: dict, ident: int, channel: Channel, lock: threading.Lock) -> None:
         self._table, self._ident, self._channel, self._lock = table, ident, channel, lock
 
     def close(self) -> None:
         with self._lock:
             self._table.pop(self._ident, None)
-        if self._channel is not None:
-            self._channel.close()
+        self._channel.close()
 
 
 class _Publisher:
