@@ -1,4 +1,12 @@
 # One image for every service; compose.yaml gives each service its own command.
+
+# The web page's npm packages, pinned in package-lock.json, bundled once (as ./bootstrap does).
+FROM node:20-bookworm-slim AS web
+WORKDIR /web
+COPY services/web/frontend/package.json services/web/frontend/package-lock.json services/web/frontend/build.mjs ./frontend/
+COPY services/web/frontend/entries ./frontend/entries
+RUN npm ci --prefix frontend --no-audit --no-fund && node frontend/build.mjs
+
 FROM python:3.11-slim-bookworm
 
 ENV PYTHONUNBUFFERED=1 \
@@ -14,8 +22,10 @@ WORKDIR /app
 COPY pyproject.toml README.md ./
 COPY libs ./libs
 COPY services ./services
+COPY --from=web /web/static/vendor ./services/web/static/vendor
 RUN pip install .
 
 # Recordings and user data live in volumes, never in the image.
-VOLUME ["/app/recordings"]
+ENV ASIBOT_DATA=/data
+VOLUME ["/app/recordings", "/data"]
 CMD ["asibot", "--help"]

@@ -22,7 +22,7 @@ import uuid
 import can
 import numpy as np
 
-from asibot import keys, testing
+from asibot import keys, ownership, testing
 from asibot.arm_driver import config, emulator
 from asibot.arm_driver.bitlength import exact_bits, worst_case_bits
 from asibot.arm_driver.service import ArmDriverService
@@ -87,12 +87,14 @@ def main() -> int:
         states: list[ArmState] = []
         client.subscribe(keys.arm_state("asibot"), ArmState, states.append)
         cmd = client.publisher(keys.arm_command("asibot"), ArmCommand, express=True)
+        controller = ownership.announce(client, "asibot", "arm", "bench")   # commands carry it
         try:
             testing.wait_until(lambda: states and states[-1].mode == "idle", 15, message="driver did not start")
+            testing.wait_until(lambda: service.holder.current == controller, 5, message="driver did not see the bench")
             cmd.wait_for_subscribers(5)
 
             # Bus load while streaming a slow motion on every joint.
-            cmd.put(ArmCommand(mode="position", values=[0.5] * 5))
+            cmd.put(ArmCommand(mode="position", values=[0.5] * 5, controller=controller))
             time.sleep(0.3)
             sniffer.take()
             t0 = time.time()
@@ -110,7 +112,7 @@ def main() -> int:
             units = cfg.joints[0].units
             here = units.to_counts(states[-1].positions[0])
             home = units.to_rad(here)
-            cmd.put(ArmCommand(mode="position", values=[home] + list(states[-1].positions[1:])))
+            cmd.put(ArmCommand(mode="position", values=[home] + list(states[-1].positions[1:]), controller=controller))
             time.sleep(0.3)
             rest = list(states[-1].positions[1:])
             latencies = []
@@ -119,7 +121,7 @@ def main() -> int:
                 want = units.to_counts(goal)
                 sniffer.take()
                 sent = time.time()
-                cmd.put(ArmCommand(mode="position", values=[goal] + rest))
+                cmd.put(ArmCommand(mode="position", values=[goal] + rest, controller=controller))
                 deadline = time.monotonic() + 0.5
                 found = None
                 while found is None and time.monotonic() < deadline:

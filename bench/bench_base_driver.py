@@ -13,7 +13,7 @@ import sys
 import time
 import timeit
 
-from asibot import keys, testing
+from asibot import keys, ownership, testing
 from asibot.bus import Bus
 from asibot.messages import Twist
 
@@ -97,9 +97,10 @@ def cmd_vel_latency(samples: int = 200) -> list[float]:
             svc = BaseDriverService(svc_bus, "pioneer", emu.url)
             user = Bus("bench")
             try:
-                testing.wait_until(lambda: svc.driver.connected, 10)
+                controller = ownership.announce(user, "pioneer", "base", "bench")   # cmd_vel carries it
+                testing.wait_until(lambda: svc.driver.connected and svc.holder.current == controller, 10)
                 pub = user.publisher(keys.base_cmd_vel("pioneer"), Twist, express=True)
-                pub.put(Twist(vx=0.0, wz=0.0))
+                pub.put(Twist(vx=0.0, wz=0.0, controller=controller))
                 time.sleep(0.5)
                 out = []
                 for i in range(samples):
@@ -107,7 +108,7 @@ def cmd_vel_latency(samples: int = 200) -> list[float]:
                     with emu.lock:
                         start = len(emu.robot.received)
                     t0 = time.monotonic()
-                    pub.put(Twist(vx=mm / 1000.0, wz=0.0))
+                    pub.put(Twist(vx=mm / 1000.0, wz=0.0, controller=controller))
                     deadline = t0 + 0.5
                     while time.monotonic() < deadline:
                         with emu.lock:
@@ -117,7 +118,7 @@ def cmd_vel_latency(samples: int = 200) -> list[float]:
                             break
                         time.sleep(0.002)     # the emulator stamps arrival; polling slowly spares the GIL
                     time.sleep(0.01)
-                pub.put(Twist(vx=0.0, wz=0.0))
+                pub.put(Twist(vx=0.0, wz=0.0, controller=controller))
             finally:
                 user.close()
                 svc.close()

@@ -15,6 +15,7 @@ from typing import Callable
 from asibot import keys, messages
 from asibot.bus import DEFAULT_ROUTER, ROUTER_ENV, Bus, open_router, router_endpoint
 from asibot.errors import AsibotError
+from asibot.estop import who
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
@@ -81,7 +82,7 @@ def cmd_up(args: argparse.Namespace) -> int:
             def announce() -> None:
                 port = spec.url.rsplit(":", 1)[-1].split("/")[0]
                 if wait_for_port(f"tcp/127.0.0.1:{port}", 30.0):
-                    sup.say("asibot", f"web UI ready: open {spec.url}")
+                    sup.say("asibot", f"web: {spec.url}")
             threading.Thread(target=announce, daemon=True).start()
 
     sup.on_event = on_event
@@ -145,7 +146,7 @@ def cmd_estop(args: argparse.Namespace) -> int:
             return 1
         reason = f"asibot estop by {_who()}"
         for robot in robots:
-            bus.latch(keys.estop(robot), messages.EStop(engaged=True, reason=reason))
+            bus.latch(keys.estop(robot), messages.EStop(engaged=True, reason=reason, by=who("asibot estop")))
         code = 0
         for robot in robots:
             engaged = _wait_for(lambda r=robot: _driver_estop(bus, r), 2.0)
@@ -160,7 +161,8 @@ def cmd_estop(args: argparse.Namespace) -> int:
 
 def cmd_release(args: argparse.Namespace) -> int:
     with Bus("release", wait=args.wait) as bus:
-        bus.latch(keys.estop(args.robot), messages.EStop(engaged=False, reason=f"released by {_who()}"))
+        bus.latch(keys.estop(args.robot), messages.EStop(engaged=False, reason="asibot release",
+                                                          by=who("asibot release")))
         if _wait_for(lambda: _driver_estop(bus, args.robot) is False, 2.0):
             print(f"{args.robot}: emergency stop released; it moves again only on a new motion request")
             return 0

@@ -13,6 +13,7 @@ from typing import Sequence
 from asibot import keys
 from asibot.bus import Bus
 from asibot.errors import RpcError, Timeout
+from asibot.estop import who
 from asibot.messages import EStop
 
 #: Per-call timeout for quick verbs, s.
@@ -93,6 +94,10 @@ class CartesianClient:
         """Stream a velocity (m/s, deg/s); send again within 200 ms to keep moving."""
         self._call("movv", velocity=velocity)
 
+    def movjv(self, velocity: Sequence[float]) -> None:
+        """Stream joint velocities (deg/s, one per joint); send again within 200 ms to keep moving."""
+        self._call("movjv", velocity=velocity)
+
     def home(self) -> float:
         return self._call("home")["duration"]
 
@@ -108,6 +113,8 @@ class CartesianClient:
                 raise Timeout(f"The motion did not finish within {timeout:g} s; it was stopped.")
 
     def stop(self) -> None:
+        """Stop the arm, whoever moved it: its controller ends its motion and tells the driver
+        to hold where the arm is."""
         self._call("stop")
 
     def tool(self, tool: Sequence[float] | None = None) -> None:
@@ -131,13 +138,14 @@ class CartesianClient:
     # --- safety ----------------------------------------------------------------------------
     def estop(self, reason: str = "emergency stop from a program") -> None:
         """Engage the robot's emergency stop: it stops at once and refuses every motion until
-        release(). The drivers and the controller latch it, so it holds after this program ends."""
-        self._connected().latch(keys.estop(self.robot), EStop(engaged=True, reason=reason))
+        release(). The drivers and the controller keep it latched, so it holds after this program
+        ends (asibot.estop); their events say who engaged it (this user, program and pid)."""
+        self._connected().latch(keys.estop(self.robot), EStop(engaged=True, reason=reason, by=who()))
 
     def release(self, reason: str = "released from a program") -> None:
         """Release the emergency stop. Nothing moves by itself afterwards: the robot moves again
-        only on a motion request made after the release."""
-        self._connected().latch(keys.estop(self.robot), EStop(engaged=False, reason=reason))
+        only on a motion request made after the release. The drivers' events say who released it."""
+        self._connected().latch(keys.estop(self.robot), EStop(engaged=False, reason=reason, by=who()))
 
     def reset_fault(self) -> dict:
         """Ask the robot's driver to clear a fault (re-initialise the drive that failed);

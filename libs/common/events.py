@@ -30,9 +30,14 @@ log = logging.getLogger(__name__)
 
 
 class CommandRefused(ValueError):
-    """A command with a value the robot must not be sent (beyond a limit, not finite): refused
-    whole, never clipped. `reason` is a short key for rate-limiting the refusals
-    ("position_limit", "speed_limit", "not_finite")."""
+    """A command the robot must not obey: a value beyond a limit or not finite (refused whole,
+    never clipped), or a sender that does not hold the robot (asibot.ownership), or a stream
+    from before a recovery (asibot.arming). `reason` is a short key for rate-limiting the
+    refusals ("position_limit", "speed_limit", "not_finite", "not_holder", "not_ready");
+    `code` and `level` are those of the Event that says so."""
+
+    code = "bad_command"
+    level = "error"
 
     def __init__(self, reason: str, sentence: str) -> None:
         super().__init__(sentence)

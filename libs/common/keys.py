@@ -6,15 +6,18 @@ one edit here and a typo is a NameError instead of a silent, empty subscription.
 
 from __future__ import annotations
 
+from typing import Callable
+
 import re
 
 _NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]*$")
 
 RPC_VERBS_CART = (
-    "stat", "inv", "fwd", "movj", "movl", "movv", "relj", "stop", "wait", "tool", "act",
+    "stat", "inv", "fwd", "movj", "movl", "movv", "movjv", "relj", "stop", "wait", "tool", "act",
     "home", "pointer",
 )
 RPC_VERBS_NAV = ("goto", "cancel", "places", "save_place", "drive", "turn")
+RPC_VERBS_PERCEPTION = ("find",)
 
 
 def _chunk(value: str, what: str) -> str:
@@ -102,9 +105,27 @@ def driver_alive(robot_id: str) -> str:
     return f"{robot(robot_id)}/driver/alive"
 
 
-def controller_alive(robot_id: str) -> str:
-    """Liveliness of the Cartesian controller; drivers stop the arm when it vanishes."""
-    return f"{robot(robot_id)}/controller/alive"
+def controller_alive(robot_id: str, controller: str) -> str:
+    """Liveliness of one controller of the arm and its gripper (the kinematics service), named
+    by its identity: the drivers obey only the one that holds the robot (asibot.ownership) and
+    stop the arm when it vanishes."""
+    return f"{robot(robot_id)}/controller/alive/{_chunk(controller, 'controller id')}"
+
+
+def controllers_alive(robot_id: str) -> str:
+    """Pattern of the liveliness tokens of every controller of the arm of `robot_id`."""
+    return f"{robot(robot_id)}/controller/alive/*"
+
+
+def base_controller_alive(robot_id: str, controller: str) -> str:
+    """Liveliness of one controller of the mobile base (the nav service, a teleop program, a
+    test), named by its identity: the drivers obey only the one that holds the base."""
+    return f"{robot(robot_id)}/base/controller/alive/{_chunk(controller, 'controller id')}"
+
+
+def base_controllers_alive(robot_id: str) -> str:
+    """Pattern of the liveliness tokens of every controller of the base of `robot_id`."""
+    return f"{robot(robot_id)}/base/controller/alive/*"
 
 
 def sim_truth(robot_id: str) -> str:
@@ -132,6 +153,11 @@ def nav_rpc(robot_id: str, verb: str) -> str:
     return f"{robot(robot_id)}/nav/rpc/{_chunk(verb, 'verb')}"
 
 
+def perception_rpc(robot_id: str, verb: str) -> str:
+    """Perception's verbs (`find`: where a coloured object is, in the robot's base frame)."""
+    return f"{robot(robot_id)}/perception/rpc/{_chunk(verb, 'verb')}"
+
+
 def estop(robot_id: str) -> str:
     return f"{robot(robot_id)}/estop"
 
@@ -152,6 +178,18 @@ def health(service_name: str, instance: str) -> str:
 ALL_SERVICES = "svc/**"
 ALL_HEALTH = "health/**"
 ALL_DRIVERS = "rb/*/driver/alive"
+ALL_CONTROLLERS = "rb/*/controller/alive/*"
+
+
+def every_robot(key_of_robot: Callable[..., str], *names: str) -> str:
+    """The pattern matching one kind of key on every robot: `every_robot(arm_state)` is
+    `rb/*/arm/state` and `every_robot(camera_rgb, "*")` is `rb/*/camera/*/rgb`, so a
+    subscriber to all robots spells no key by hand either."""
+    any_ = "ANY--"  # a valid chunk no real name uses, swapped for '*' afterwards
+    key = key_of_robot(any_, *(any_ if n == "*" else n for n in names))
+    if not key.startswith(robot(any_) + "/"):
+        raise ValueError(f"{key_of_robot.__name__} does not build a robot key")
+    return "/".join("*" if part == any_ else part for part in key.split("/"))
 EVERYTHING = "**"
 
 #: What, after `rb/<robot>/`, moves a robot or changes what it may do (besides every RPC).
@@ -188,6 +226,18 @@ def robot_of(key: str) -> str | None:
         return parse_robot(key)[0]
     except ValueError:
         return None
+
+
+def controller_of(key: str) -> str | None:
+    """The controller id of a controller's liveliness key (arm or base); None for other keys."""
+    try:
+        _, rest = parse_robot(key)
+    except ValueError:
+        return None
+    parts = rest.split("/")
+    if parts[:-1] in (["controller", "alive"], ["base", "controller", "alive"]) and _NAME.match(parts[-1]):
+        return parts[-1]
+    return None
 
 
 def camera_of(key: str) -> str | None:

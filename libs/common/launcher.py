@@ -45,6 +45,7 @@ def local_environment(spec: ServiceSpec, endpoint: str) -> dict[str, str]:
     # In containers the router is `tcp/router:7447`; here it is the loopback endpoint.
     env["ASIBOT_ROUTER"] = endpoint
     env["ASIBOT_ROUTER_LISTEN"] = endpoint
+    env["ASIBOT_WEB_HOST"] = "127.0.0.1"   # a container listens on all its interfaces; here loopback only
     env["PYTHONUNBUFFERED"] = "1"
     return env
 

@@ -389,10 +389,13 @@ COMMAND_WATCHDOG_S = 0.2
 
 @message
 class ArmCommand:
-    """Joint reference: position (rad, optional velocity feed-forward rad/s) or velocity (rad/s)."""
+    """Joint reference: position (rad, optional velocity feed-forward rad/s) or velocity (rad/s).
+    `controller` is the identity of the controller that sends it: a driver obeys only the one
+    that holds the robot (asibot.ownership)."""
     mode: str
     values: list[float]
     velocities: list[float] = dataclasses.field(default_factory=list)
+    controller: str = ""
 
     def __post_init__(self) -> None:
         if self.mode not in ("position", "velocity"):
@@ -412,6 +415,7 @@ class GripperState:
 @message
 class GripperCommand:
     opening: float  # m between fingers
+    controller: str = ""  # the sender's identity, as in ArmCommand
 
     def __post_init__(self) -> None:
         finite([self.opening], "GripperCommand", "opening")
@@ -419,9 +423,11 @@ class GripperCommand:
 
 @message
 class Twist:
-    """Base velocity command: vx m/s forward, wz rad/s counter-clockwise."""
+    """Base velocity command: vx m/s forward, wz rad/s counter-clockwise. `controller` is the
+    identity of the base controller that sends it (asibot.ownership)."""
     vx: float
     wz: float
+    controller: str = ""
 
     def __post_init__(self) -> None:
         finite([self.vx, self.wz], "Twist", "vx/wz")
@@ -503,8 +509,11 @@ class CartState:
 
 @message
 class EStop:
+    """The latched emergency stop of one robot; `by` says who engaged or released it (a person
+    and program, `asibot.estop.who()`), for the drivers' events and the logs."""
     engaged: bool
     reason: str = ""
+    by: str = ""
 
 
 @message

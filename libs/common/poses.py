@@ -50,3 +50,20 @@ def yaw_quaternion_wxyz(theta: float) -> list[float]:
     """A rotation of `theta` rad about z, as (w, x, y, z)."""
     return [math.cos(theta / 2), 0.0, 0.0, math.sin(theta / 2)]
 
+
+
+#: The five coordinates of a point as users read and type them: name and unit.
+POINT_AXES: tuple[tuple[str, str], ...] = (
+    ("x", "m"), ("y", "m"), ("z", "m"), ("rot(y')", "deg"), ("rot(z'')", "deg"))
+
+
+def user_point(pose: "list[float] | np.ndarray") -> list[float]:
+    """A 5-element pose in SI (m, rad) as the user's point (m, deg)."""
+    p = [float(v) for v in pose]
+    return p[:3] + [math.degrees(p[3]), math.degrees(p[4])]
+
+
+def si_pose(point: "list[float] | np.ndarray") -> list[float]:
+    """The user's point (m, deg) as a 5-element pose in SI (m, rad)."""
+    p = [float(v) for v in point]
+    return p[:3] + [math.radians(p[3]), math.radians(p[4])]

@@ -1,19 +1,26 @@
-"""Test helpers: a real router on a free loopback port, polling with a deadline, and an ideal
-arm driver to test controllers against (also used by bench/bench_control.py)."""
+"""Test helpers: a real router on a free loopback port, polling with a deadline, an ideal
+arm driver to test controllers against (also used by bench/bench_control.py), and a stream
+of commands on a thread, as a held jog button sends them."""
 
 from __future__ import annotations
 
 import contextlib
 import os
+import shutil
+import signal
 import socket
+import subprocess
+import sys
 import threading
 import time
+from pathlib import Path
 from typing import Any, Callable, Iterator
 
 import numpy as np
 
 from asibot import keys
 from asibot.bus import MEMORY_SCHEME, ROUTER_ENV, Bus, open_router
+from asibot.ownership import Holder
 from asibot.messages import ArmCommand, ArmState, GripperCommand, GripperState
 from asibot.timing import Ticker
 
@@ -84,7 +91,8 @@ def wait_until(predicate: Callable[[], object], timeout: float = 5.0, interval: 
 class IdealDriver:
     """An ideal arm driver: an integrator that keeps the driver contract (arm/state and
     gripper/state at 100 Hz, obeys arm/command in position mode within the joint limits and max
-    velocities, announces driver_alive) for the robot `robot` of catalog entry `spec`
+    velocities, from the controller that holds the robot only (asibot.ownership; the others'
+    go to `refused`), announces driver_alive) for the robot `robot` of catalog entry `spec`
     (asibot.robots.RobotSpec). Starts at spec.home; `set_joints(q)` teleports it (rad).
     The fingers move at 0.1 m/s and stop on an object of width `object_width` (m) if set;
     with `gripper_start_delay` (s) they start only that long after each gripper command, as
@@ -96,6 +104,8 @@ class IdealDriver:
         self.target = self.q.copy()
         self.vmax = np.asarray(spec.max_velocity, float)
         self.commands: list[ArmCommand] = []
+        #: Commands from a sender that does not hold the robot: refused, never obeyed.
+        self.refused: list[ArmCommand | GripperCommand] = []
         self.gripper = 0.0
         self.gripper_target = 0.0
         #: Width of an object between the fingers (m), or None: closing stops on it.
@@ -108,6 +118,8 @@ class IdealDriver:
         self.bus = Bus("ideal-driver")
         self.pub = self.bus.publisher(keys.arm_state(robot), ArmState)
         self.grip_pub = self.bus.publisher(keys.gripper_state(robot), GripperState)
+        self.holder = Holder(robot, "arm")
+        self.holder.follow(self.bus)
         self.bus.subscribe(keys.arm_command(robot), ArmCommand, self._on_command)
         self.bus.subscribe(keys.gripper_command(robot), GripperCommand, self._on_grip)
         self.token = self.bus.announce(keys.driver_alive(robot))
@@ -115,6 +127,10 @@ class IdealDriver:
         self.thread.start()
 
     def _on_command(self, cmd: ArmCommand) -> None:
+        if self.holder.refusal(cmd.controller) is not None:
+            with self._lock:
+                self.refused.append(cmd)
+            return
         if cmd.mode == "position" and len(cmd.values) == len(self.q):
             with self._lock:
                 self.commands.append(cmd)
@@ -122,6 +138,9 @@ class IdealDriver:
 
     def _on_grip(self, cmd: GripperCommand) -> None:
         with self._lock:
+            if self.holder.refusal(cmd.controller) is not None:
+                self.refused.append(cmd)
+                return
             self._grip_pending = (cmd.opening, time.monotonic())
 
     def set_joints(self, q) -> None:
@@ -129,6 +148,12 @@ class IdealDriver:
         with self._lock:
             self.q = np.asarray(q, float).copy()
             self.target = self.q.copy()
+
+    def move_to(self, q) -> None:
+        """Start moving towards q (rad) at the joints' max speeds, as on a command the
+        controller under test did not send (a stale one, another program's)."""
+        with self._lock:
+            self.target = np.clip(np.asarray(q, float), self.spec.lower, self.spec.upper)
 
     def _run(self) -> None:
         ticker = Ticker(100.0, stop=self._stop)
@@ -177,3 +202,122 @@ class Inbox:
     def last(self) -> object:
         with self._lock:
             return self._items[-1]
+
+
+class Stack:
+    """`asibot up` as a user runs it, for end-to-end tests: a subprocess reading a copy of
+    `compose` in `folder`, its own router and web ports, recordings and user files in `folder`,
+    stopped with Ctrl-C (SIGINT)."""
+
+    def __init__(self, folder: Path, profile: str, only: list[str], compose: Path) -> None:
+        self.folder = folder
+        self.endpoint = f"tcp/127.0.0.1:{free_port()}"
+        self.web_port = free_port()
+        self.web_url = f"http://127.0.0.1:{self.web_port}/"
+        self.data = folder / "data"
+        self.env = dict(os.environ, ASIBOT_ROUTER=self.endpoint, ASIBOT_WEB_PORT=str(self.web_port),
+                        ASIBOT_DATA=str(self.data), ASIBOT_RECORDINGS=str(folder / "recordings"))
+        shutil.copy(compose, folder / "compose.yaml")
+        self.log_path = folder / "up.log"
+        self._log = open(self.log_path, "w")
+        cmd = [sys.executable, "-m", "asibot.cli", "up", "--profile", profile, "--file", str(folder / "compose.yaml")]
+        if only:
+            cmd += ["--only", *only]
+        self.proc = subprocess.Popen(cmd, cwd=folder, env=self.env, stdout=self._log, stderr=subprocess.STDOUT)
+        self.bus = Bus("e2e-test", self.endpoint, wait=20.0)
+
+    def log(self) -> str:
+        return self.log_path.read_text()
+
+    def wait_alive(self, *services: str, timeout: float = 60.0) -> list[str]:
+        """Wait until each `<service>/<instance>` announces itself; the live service keys."""
+        want = {keys.service(*s.split("/", 1)) for s in services}
+        try:
+            wait_until(lambda: want <= set(self.bus.alive(keys.ALL_SERVICES)), timeout, interval=0.5)
+        except AssertionError:
+            missing = sorted(want - set(self.bus.alive(keys.ALL_SERVICES)))
+            raise AssertionError(f"not alive after {timeout} s: {missing}\n{self.log()}") from None
+        return self.bus.alive(keys.ALL_SERVICES)
+
+    def run(self, *args: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
+        """Run a Python program against the stack; on a hang, fail with what it printed."""
+        try:
+            return subprocess.run([sys.executable, *args], env=self.env, capture_output=True, text=True,
+                                  timeout=timeout, cwd=self.folder)
+        except subprocess.TimeoutExpired as exc:
+            raise AssertionError(f"{args} did not finish within {timeout} s; it printed:\n"
+                                 f"{exc.stdout}\n{exc.stderr}\n--- asibot up:\n{self.log()}") from None
+
+    def stop(self) -> int:
+        self.bus.close()
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)  # Ctrl-C
+            try:
+                self.proc.wait(20)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self._log.close()
+        return self.proc.returncode
+
+
+class Stream:
+    """Calls `send()` every `period` s on a thread, as a held jog button or a program in a loop
+    does, until `close()`. A call that raises is counted in `errors` and the stream goes on.
+    `pause()` stops it (it returns once no call runs), `resume()` starts it again; `sent`
+    holds the monotonic time of every call, for `longest_gap`."""
+
+    def __init__(self, send: Callable[[], object], period: float = 0.02) -> None:
+        self._send, self.period = send, period
+        self.sent: list[float] = []
+        self.errors: list[Exception] = []
+        self._lock = threading.Lock()
+        self._running = threading.Event()
+        self._closed = threading.Event()
+        self._idle = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="stream", daemon=True)
+        self.resume()
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._closed.is_set():
+            if not self._running.is_set():
+                self._idle.set()
+                self._running.wait(0.05)
+                continue
+            self._idle.clear()
+            t = time.monotonic()
+            try:
+                self._send()
+            except Exception as exc:
+                with self._lock:
+                    self.errors.append(exc)
+            with self._lock:
+                self.sent.append(t)
+            time.sleep(max(0.0, t + self.period - time.monotonic()))
+        self._idle.set()
+
+    def pause(self) -> None:
+        self._running.clear()
+        self._idle.clear()
+        self._idle.wait(5.0)
+
+    def resume(self) -> None:
+        self._running.set()
+
+    def longest_gap(self, since: float = 0.0) -> float:
+        """The longest time between two calls from `since` on, s (0 with fewer than two)."""
+        with self._lock:
+            times = [t for t in self.sent if t >= since]
+        return max((b - a for a, b in zip(times, times[1:])), default=0.0)
+
+    def close(self) -> None:
+        self._closed.set()
+        self._running.set()
+        self._thread.join(timeout=2.0)
+
+    def __enter__(self) -> "Stream":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -5,6 +5,9 @@ heartbeats, statuswords, bus-off), advances the set-points, sends them with SYNC
 the arm state. Commands, estop and liveliness arrive from other threads and only touch the
 set-point generator under a lock. Any fault quick-stops every drive and latches until
 reset_fault; estop, the 200 ms watchdog and a vanished controller hold position instead.
+Whose commands are obeyed is decided by the service (asibot.ownership); after a fault reset,
+an estop release or a change of controller, a stream of commands from before moves nothing
+until it pauses (asibot.arming).
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from asibot.arm_driver.cia402 import State
 from asibot.arm_driver.config import ArmConfig
 from asibot.arm_driver.master import CanopenMaster, DriveError, Feedback
 from asibot.arm_driver.motion import JointReference
+from asibot.arming import Arming
 from asibot.messages import ArmState
 from asibot.timing import Ticker
 
@@ -53,11 +57,12 @@ class ArmDriver:
         self._reported: set[tuple[str, int]] = set()
         self.estop = False
         self._estop_reason = ""
-        self._controller_seen = False
+        self.arming = Arming()          # a driver starts armed (asibot.arming says why)
         self._watchdog_fired = False
         self._reset_request: tuple[threading.Event, list] | None = None
         self._feedback: dict[int, Feedback] = {}
-        self.counters = {"cycles": 0, "rejected_commands": 0, "ignored_commands": 0, "faults": 0, "tx_errors": 0}
+        self.counters = {"cycles": 0, "rejected_commands": 0, "ignored_commands": 0, "not_ready": 0, "faults": 0,
+                         "tx_errors": 0}
         self._ticker: Ticker | None = None
         self._thread = threading.Thread(target=self._run, name="arm-control", daemon=True)
 
@@ -77,10 +82,13 @@ class ArmDriver:
         self.master.close()
 
     # ------------------------------------------------------------ inputs (any thread)
-    def command(self, mode: str, values: list[float], velocities: list[float] | None = None) -> bool:
-        """Apply an ArmCommand. Raises ValueError (and changes nothing: the arm keeps its
-        previous motion) on bad input; motion.CommandRefused for a value beyond a joint's
-        limits or max speed, or not finite: such a command is refused whole, never clipped.
+    def command(self, mode: str, values: list[float], velocities: list[float] | None = None,
+                controller: str = "") -> bool:
+        """Apply an ArmCommand of `controller` (the holder: the service checked). Raises
+        ValueError (and changes nothing: the arm keeps its previous motion) on bad input;
+        motion.CommandRefused for a value beyond a joint's limits or max speed, or not finite:
+        such a command is refused whole, never clipped; arming.NotReady for a command that
+        continues a stream from before the last recovery.
 
         Returns False when the command was ignored because of estop or a fault.
         """
@@ -105,10 +113,14 @@ class ArmDriver:
             except ValueError:
                 self.counters["rejected_commands"] += 1
                 raise
+            now = time.monotonic()
+            may_move = self.arming.admit(controller, now)   # noted even when ignored below
             if self.estop or self._faulted:
                 self.counters["ignored_commands"] += 1
                 return False
-            now = time.monotonic()
+            if not may_move:
+                self.counters["not_ready"] += 1
+                raise self.arming.refusal("the arm")
             if mode == "position":
                 self.ref.position(values, velocities, now, measured)
             else:
@@ -116,32 +128,49 @@ class ArmDriver:
             self._watchdog_fired = False
             return True
 
-    def set_estop(self, engaged: bool, reason: str = "") -> None:
+    def heard(self, controller: str) -> None:
+        """A command of a controller that does not hold the arm (refused by the service): noted,
+        so that its stream does not move the arm the moment it takes over."""
+        with self._lock:
+            self.arming.heard(controller, time.monotonic())
+
+    def set_estop(self, engaged: bool, reason: str = "", by: str = "") -> None:
         with self._lock:
             if engaged == self.estop:
                 return
             self.estop = engaged
             self._estop_reason = reason
+            who = f" by {by}" if by else ""
             if engaged:
                 self.ref.hold()
+            else:
+                self.arming.disarm(f"the emergency stop was released{who}")
+                ready = self.arming.ready_text("The arm")
         if engaged:
-            self.on_event("warning", "estop", "Emergency stop engaged" + (f" ({reason})" if reason else "")
+            self.on_event("warning", "estop", f"Emergency stop engaged{who}" + (f" ({reason})" if reason else "")
                           + ": the arm holds its position and ignores motion commands until it is released.")
         else:
-            self.on_event("info", "estop_released", "Emergency stop released: the arm accepts commands again.")
+            self.on_event("info", "estop_released", f"Emergency stop released{who}"
+                          + (f" ({reason})" if reason else "") + ".")
+            self.on_event("info", "ready", ready)
 
-    def set_controller_alive(self, alive: bool) -> None:
-        """The kinematics service's liveliness: when it vanishes mid-motion, stop."""
+    def set_controller(self, holder: str | None) -> None:
+        """The controller that holds the arm changed (asibot.ownership): stop if the arm was
+        moving, and re-arm for the new holder, if any."""
         with self._lock:
-            if alive:
-                self._controller_seen = True
-                return
             moving = self.ref.moving
             if moving:
                 self.ref.hold()
+            if holder is not None:
+                self.arming.disarm(f"controller {holder!r} took hold of it")
+                ready = self.arming.ready_text("The arm")
+            else:
+                self.arming.disarm("its controller disappeared")
         if moving:
             self.on_event("warning", "controller_lost",
-                          "The Cartesian controller disappeared while the arm was moving: the arm stopped.")
+                          "The controller of the arm changed or disappeared while the arm was moving: the arm stopped.")
+        if holder is not None:
+            self.on_event("info", "ready", ready)
 
     def reset_fault(self, timeout: float = 10.0) -> dict:
         """Clear a latched fault: re-initialise lost drives, reset faulted ones, enable all.
@@ -360,7 +389,11 @@ class ArmDriver:
         log.info("resetting the fault; re-initialising drives %s", lost or "none")
         self._bring_up(lost)
         self.master.snapshot()          # the error-reset EMCYs of this reset are not news
+        with self._lock:
+            self.arming.disarm("the fault was reset")
+            ready = self.arming.ready_text("The arm")
         self.on_event("info", "fault_reset", "The fault was reset: the drives are enabled and hold their position.")
+        self.on_event("info", "ready", ready)
         return {"reinitialised": [self._name(n) for n in lost]}
 
     def _name(self, node: int) -> str:

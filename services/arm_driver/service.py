@@ -1,8 +1,9 @@
 """The Zenoh glue: bus messages to ArmDriver calls, and the driver's state and events out.
 
-Keys: publishes arm_state and events, subscribes arm_command, estop (latched) and watches
-controller_alive; serves driver rpc `status`, `reset_fault` and, on the emulated bus,
-`inject_fault`; announces driver_alive.
+Keys: publishes arm_state and events, subscribes arm_command and estop (latched, and kept
+served: asibot.estop), watches the controllers' liveliness to know which one holds the arm
+(asibot.ownership: only its commands are obeyed); serves driver rpc `status`, `reset_fault`
+and, on the emulated bus, `inject_fault`; announces driver_alive.
 """
 
 from __future__ import annotations
@@ -16,10 +17,13 @@ from asibot.arm_driver import canbus, config
 from asibot.arm_driver import emulator as emulation
 from asibot.arm_driver.driver import ArmDriver, FaultError
 from asibot.arm_driver.master import CanopenMaster
+from asibot.arming import NotReady
 from asibot.bus import Bus
 from asibot.errors import RpcError
-from asibot.events import EventThrottle, refusal_reason
+from asibot.estop import EStopState
+from asibot.events import CommandRefused, EventThrottle, refusal_reason
 from asibot.messages import ArmCommand, ArmState, EStop, Event
+from asibot.ownership import Holder
 from asibot.runtime import Service
 
 log = logging.getLogger(__name__)
@@ -56,10 +60,12 @@ class ArmDriverService(Service):
         self.bus = bus
         self.driver = ArmDriver(CanopenMaster(can_bus, self.config), self.config,
                                 on_state=self._state.put, on_event=self._event)
-        bus.subscribe(keys.estop(robot), EStop, self._on_estop, latest=True)
+        self.estop = EStopState(bus, robot, self._on_estop)
+        self.holder = Holder(robot, "arm", on_change=self.driver.set_controller)
+        self.holder.follow(bus)
+        self.not_holder = 0
         bus.subscribe(keys.arm_command(robot), ArmCommand, self._on_command, with_key=True,
                       on_reject=self._refuse_command)
-        bus.watch(keys.controller_alive(robot), self._on_controller)
         bus.serve(keys.driver_rpc(robot, "status"), self._status)
         bus.serve(keys.driver_rpc(robot, "reset_fault"), self._reset_fault)
         if self.emulator is not None:
@@ -69,8 +75,16 @@ class ArmDriverService(Service):
 
     # ------------------------------------------------------------ in
     def _on_command(self, key: str, cmd: ArmCommand) -> None:
+        refused = self.holder.refusal(cmd.controller)
+        if refused is not None:     # not the holder's: noted for re-arming, never obeyed
+            self.not_holder += 1
+            self.driver.heard(cmd.controller)
+            self._refuse_command(key, refused)
+            return
         try:
-            self.driver.command(cmd.mode, cmd.values, cmd.velocities)
+            self.driver.command(cmd.mode, cmd.values, cmd.velocities, cmd.controller)
+        except NotReady as exc:     # a stream from before a recovery
+            self._refuse_command(key, exc)
         except ValueError as exc:  # beyond the limits, not finite, wrong length: the driver's sentence
             self.bus.reject(key, exc)
             self._refuse_command(key, exc)
@@ -78,18 +92,16 @@ class ArmDriverService(Service):
     def _refuse_command(self, key: str, exc: Exception) -> None:
         # Answered with an Event, as the driver contract asks, not only counted; a stream of
         # refusals gives one Event a second per reason, with the count of the others.
-        self._refusals.event("error", "bad_command",
+        level, code = (exc.level, exc.code) if isinstance(exc, CommandRefused) else ("error", "bad_command")
+        self._refusals.event(level, code,
                              f"Arm command refused, the arm keeps its previous motion: {str(exc).rstrip('.')}.",
                              reason=f"arm:{refusal_reason(exc)}")
 
     def _on_estop(self, msg: EStop) -> None:
-        self.driver.set_estop(msg.engaged, msg.reason)
-
-    def _on_controller(self, key: str, alive: bool) -> None:
-        self.driver.set_controller_alive(alive)
+        self.driver.set_estop(msg.engaged, msg.reason, msg.by)
 
     def _status(self, request: dict) -> dict:
-        return {"robot": self.robot, **self.driver.status()}
+        return {"robot": self.robot, "controller": self.holder.current or "", **self.driver.status()}
 
     def _reset_fault(self, request: dict) -> dict:
         try:
@@ -133,7 +145,7 @@ class ArmDriverService(Service):
 
     # ------------------------------------------------------------ runtime hooks
     def health(self) -> dict:
-        return self.driver.health()
+        return {**self.driver.health(), "holder": self.holder.current or "", "not_holder": self.not_holder}
 
     def close(self) -> None:
         self._refusals.close()

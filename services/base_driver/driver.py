@@ -6,7 +6,10 @@ estop and reset_fault arrive from other threads and write at once (lowest latenc
 Safety rules: a lost connection zeroes the setpoint, so a reconnect never resumes an old
 velocity; while the estop is engaged every motion command is ignored; a cmd_vel beyond
 --max-vx / --max-wz (or not finite) is refused whole with a CommandRefused, never clamped and
-obeyed: the base keeps its previous command, which the watchdog ends 200 ms later.
+obeyed: the base keeps its previous command, which the watchdog ends 200 ms later. The
+service obeys only the controller that holds the base (asibot.ownership); after a reconnect,
+an estop release, a motor reset or a change of controller, a cmd_vel stream still running
+from before moves nothing until it pauses for a watchdog period (asibot.arming).
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import time
 from typing import Callable
 
 from asibot.base_driver import arcos, codec
+from asibot.arming import Arming
 from asibot.base_driver.arcos import ArcosClient, ArcosError, Identity
 from asibot.base_driver.link import Link, LinkError, open_link
 from asibot.base_driver.notices import EventSink, Notices
@@ -70,13 +74,14 @@ class BaseDriver:
         self._thread: threading.Thread | None = None
         self._last_cmd = 0.0
         self._watchdog_tripped = False
+        self.arming = Arming()          # a driver starts armed (asibot.arming says why)
         self._estop = False
         self._estop_reason = ""
         self._last_sip = 0.0
         self._reported_unreachable = False
         self._notices = Notices(on_event)
         self.last_state: BaseState | None = None
-        self.counters = {"sips": 0, "cmd_vel": 0, "ignored_estop": 0, "refused": 0,
+        self.counters = {"sips": 0, "cmd_vel": 0, "ignored_estop": 0, "refused": 0, "not_ready": 0,
                          "watchdog_stops": 0, "reconnects": 0, "bad_checksums": 0,
                          "dropped_bytes": 0}
 
@@ -109,11 +114,13 @@ class BaseDriver:
         return client.identity if client else None
 
     # ------------------------------------------------------------ commands
-    def cmd_vel(self, vx: float, wz: float) -> bool:
-        """Obey a velocity command (m/s, rad/s). Returns False when it is ignored (estop, offline).
+    def cmd_vel(self, vx: float, wz: float, controller: str = "") -> bool:
+        """Obey a velocity command (m/s, rad/s) of `controller` (the holder: the service checked).
+        Returns False when it is ignored (estop, offline).
 
         Raises CommandRefused, and changes nothing, when vx or wz is not finite or beyond the
-        driver's limits (more than SPEED_TOLERANCE over): refused, not clamped.
+        driver's limits (more than SPEED_TOLERANCE over): refused, not clamped; and
+        arming.NotReady when it continues a stream from before the last recovery.
         """
         try:
             self._check(vx, wz)
@@ -123,9 +130,13 @@ class BaseDriver:
             raise
         with self._lock:
             self.counters["cmd_vel"] += 1
+            may_move = self.arming.admit(controller, time.monotonic())   # noted even when ignored
             if self._estop:
                 self.counters["ignored_estop"] += 1
                 return False
+            if not may_move:
+                self.counters["not_ready"] += 1
+                raise self.arming.refusal("the base")
             # Only the tolerated noise is clamped here.
             cvx = max(-self.max_vx, min(self.max_vx, vx))
             cwz = max(-self.max_wz, min(self.max_wz, wz))
@@ -146,7 +157,13 @@ class BaseDriver:
                 raise CommandRefused("speed_limit", f"{name} {quantity(v, unit, limit)} is beyond the driver's "
                                                     f"limit {quantity(limit, unit, abs(v))} ({flag})")
 
-    def set_estop(self, engaged: bool, reason: str = "") -> None:
+    def heard(self, controller: str) -> None:
+        """A cmd_vel of a controller that does not hold the base (refused by the service):
+        noted, so that its stream does not move the base the moment it takes over."""
+        with self._lock:
+            self.arming.heard(controller, time.monotonic())
+
+    def set_estop(self, engaged: bool, reason: str = "", by: str = "") -> None:
         """Latched estop: engaging sends E_STOP at once; only a release re-enables motion."""
         with self._lock:
             if engaged == self._estop:
@@ -154,16 +171,38 @@ class BaseDriver:
             self._estop = engaged
             self._estop_reason = reason
             client = self._client
+            who = f" by {by}" if by else ""
+            why = f" ({reason})" if reason else ""
             if engaged:
                 if client is not None:
                     self._guarded(client.emergency_stop)
-                why = f" ({reason})" if reason else ""
                 self._on_event("error", "estop",
-                               f"Emergency stop engaged{why}: the base is stopped and ignores "
+                               f"Emergency stop engaged{who}{why}: the base is stopped and ignores "
                                "motion commands until the stop is released.")
             else:
-                self._on_event("info", "estop_released",
-                               "Emergency stop released: the base accepts motion commands again.")
+                self._on_event("info", "estop_released", f"Emergency stop released{who}{why}.")
+                self._recovered(f"the emergency stop was released{who}")
+
+    def set_controller(self, holder: str | None) -> None:
+        """The controller that holds the base changed (asibot.ownership): stop the base if it
+        was moving, and re-arm for the new holder, if any."""
+        with self._lock:
+            client = self._client
+            moving = client is not None and client.desired != (0, 0)
+            if moving:
+                self._guarded(lambda: client.set_velocity(0, 0))
+                self._on_event("warning", "controller_lost",
+                               "The controller of the base changed or disappeared while the base was moving: "
+                               "the base stopped.")
+            if holder is None:
+                self.arming.disarm("its controller disappeared")
+            else:
+                self._recovered(f"controller {holder!r} took hold of it")
+
+    def _recovered(self, why: str) -> None:
+        """Under the lock: after a recovery only a new stream moves the base; say it is ready."""
+        self.arming.disarm(why)
+        self._on_event("info", "ready", self.arming.ready_text("The base"))
 
     def reset_fault(self) -> dict:
         """Re-enable the motors (after a stall cut their power or the motor button was off)."""
@@ -174,6 +213,7 @@ class BaseDriver:
             if self._estop:
                 raise RpcError("estop", "The emergency stop is engaged; release it before resetting faults.")
             self._guarded(lambda: client.enable_motors(True))
+            self._recovered("its motors were re-enabled")
         return {"motors_enabled_requested": True}
 
     # ------------------------------------------------------------ state
@@ -246,10 +286,13 @@ class BaseDriver:
             self._reported_unreachable = False
             if self._estop:
                 self._guarded(client.emergency_stop)
+            # The line is (back) up: a stream sent while it was down must not drive on.
+            self.arming.disarm(f"the Pioneer {'re' if self.counters['reconnects'] else ''}connected on {self.port}")
         log.info("connected to %s (%s %s) on %s, params %s", ident.name, ident.klass,
                  ident.subclass, self.port, client.params.subclass)
         self._on_event("info", "connected",
                        f"Connected to the Pioneer {ident.name!r} ({ident.subclass}) on {self.port}.")
+        self._on_event("info", "ready", self.arming.ready_text("The base"))
         return True
 
     def _unreachable(self, reason: str) -> None:

@@ -1,4 +1,9 @@
-"""The Zenoh glue: bus messages to BaseDriver calls, BaseState to bus messages. Nothing else."""
+"""The Zenoh glue: bus messages to BaseDriver calls, BaseState to bus messages. Nothing else.
+
+cmd_vel is obeyed only from the controller that holds the base (asibot.ownership: it
+announces itself on `keys.base_controller_alive(robot, id)` and puts its id in every Twist);
+the estop state is kept served after its sender exits (asibot.estop).
+"""
 
 from __future__ import annotations
 
@@ -8,9 +13,12 @@ import math
 import os
 
 from asibot import keys
+from asibot.arming import NotReady
 from asibot.bus import Bus
-from asibot.events import EventThrottle, refusal_reason
+from asibot.estop import EStopState
+from asibot.events import CommandRefused, EventThrottle, refusal_reason
 from asibot.messages import Battery, Bumpers, EStop, Event, Odometry, Sonar, Twist
+from asibot.ownership import Holder
 from asibot.runtime import Service
 
 from asibot.base_driver.driver import DEFAULT_MAX_VX, DEFAULT_MAX_WZ, BaseDriver
@@ -41,7 +49,10 @@ class BaseDriverService(Service):
                                  baud=baud, params=KNOWN[params] if params else None,
                                  max_vx=max_vx, max_wz=max_wz)
         self._angles: list[float] = []
-        bus.subscribe(keys.estop(robot), EStop, self._on_estop, latest=True)
+        self.estop = EStopState(bus, robot, self._on_estop)
+        self.holder = Holder(robot, "base", on_change=self.driver.set_controller)
+        self.holder.follow(bus)
+        self.not_holder = 0
         bus.subscribe(keys.base_cmd_vel(robot), Twist, self._on_cmd_vel, with_key=True,
                       on_reject=self._refuse_command)
         bus.serve(keys.driver_rpc(robot, "status"), self._status)
@@ -51,8 +62,16 @@ class BaseDriverService(Service):
 
     # ------------------------------------------------------------ in
     def _on_cmd_vel(self, key: str, msg: Twist) -> None:
+        refused = self.holder.refusal(msg.controller)
+        if refused is not None:     # not the holder's: noted for re-arming, never obeyed
+            self.not_holder += 1
+            self.driver.heard(msg.controller)
+            self._refuse_command(key, refused)
+            return
         try:
-            self.driver.cmd_vel(msg.vx, msg.wz)
+            self.driver.cmd_vel(msg.vx, msg.wz, msg.controller)
+        except NotReady as exc:     # a stream from before a recovery
+            self._refuse_command(key, exc)
         except ValueError as exc:  # beyond --max-vx/--max-wz, not finite: the driver's sentence
             self.bus.reject(key, exc)
             self._refuse_command(key, exc)
@@ -60,15 +79,16 @@ class BaseDriverService(Service):
     def _refuse_command(self, key: str, exc: Exception) -> None:
         # Answered with an Event, as the driver contract asks, not only counted; a stream of
         # refusals gives one Event a second per reason, with the count of the others.
-        self._refusals.event("error", "bad_command",
+        level, code = (exc.level, exc.code) if isinstance(exc, CommandRefused) else ("error", "bad_command")
+        self._refusals.event(level, code,
                              f"Base command refused, the base keeps its previous motion: {str(exc).rstrip('.')}.",
                              reason=f"cmd_vel:{refusal_reason(exc)}")
 
     def _on_estop(self, msg: EStop) -> None:
-        self.driver.set_estop(msg.engaged, msg.reason)
+        self.driver.set_estop(msg.engaged, msg.reason, msg.by)
 
     def _status(self, request: dict) -> dict:
-        return {"robot": self.robot, **self.driver.status()}
+        return {"robot": self.robot, "controller": self.holder.current or "", **self.driver.status()}
 
     def _reset_fault(self, request: dict) -> dict:
         return self.driver.reset_fault()  # refusals are RpcErrors with the driver's sentence
@@ -90,7 +110,8 @@ class BaseDriverService(Service):
     # ------------------------------------------------------------ runtime hooks
     def health(self) -> dict:
         st = self.driver.status()
-        return {"connected": st["connected"], "mode": st["mode"], "fault": st["fault"], **st["counters"]}
+        return {"connected": st["connected"], "mode": st["mode"], "fault": st["fault"], **st["counters"],
+                "holder": self.holder.current or "", "not_holder": self.not_holder}
 
     def close(self) -> None:
         self._refusals.close()

@@ -20,6 +20,12 @@ nothing moves:
 - another motion started meanwhile (a movj, movl, movv or pointer): "busy".
 Asking for a movj or movl ends a running stream (movv, pointer) first: the arm holds still
 while the new motion is planned, so the plan starts where the arm is.
+
+Re-arming (asibot.arming): after the controller's own start, an estop release, a fault
+cleared or the driver back, a stream of requests (movv, movjv, pointer) that was still
+arriving moves nothing ("busy", with a sentence) until it pauses for a watchdog period or is
+restarted; a movj or movl is a new request and moves. A `stop` does not re-arm: a jog
+button pressed again at once after its stop moves at once.
 """
 
 from __future__ import annotations
@@ -30,6 +36,7 @@ from typing import Any, Protocol, Sequence
 
 import numpy as np
 
+from asibot.arming import Arming
 from asibot.errors import RpcError
 from asibot.messages import COMMAND_WATCHDOG_S
 
@@ -39,8 +46,10 @@ NOT_CONTROLLING = "not_controlling"
 MOVJ = "movj"
 MOVL = "movl"
 MOVV = "movv"
+MOVJV = "movjv"
 POINTER = "pointer"
-STATES = (NOT_CONTROLLING, MOVJ, MOVL, MOVV, POINTER)
+STREAMS = (MOVV, MOVJV, POINTER)
+STATES = (NOT_CONTROLLING, MOVJ, MOVL) + STREAMS
 
 
 class Model(Protocol):
@@ -75,7 +84,10 @@ class Reference:
 class Controller:
     """Holds the measured state, the active motion and the outcome of the last motion."""
 
-    def __init__(self, model: Model, spec: Spec) -> None:
+    def __init__(self, model: Model, spec: Spec, started: float | None = None) -> None:
+        """`started`: when the controller starts, on the clock of the requests' `now` (the
+        server's); a stream arriving then may have been running against a controller before
+        this one. None: armed from the start (tests that step time by hand)."""
         self.model, self.spec = model, spec
         self.lower = np.asarray(spec.lower, float)
         self.upper = np.asarray(spec.upper, float)
@@ -102,6 +114,9 @@ class Controller:
         # driver loss, another motion), with what it was, for the refusal's sentence.
         self._epoch = 0
         self._interrupt = RpcError("busy", "The controller changed")
+        self.arming = Arming(started)
+        if started is not None:
+            self.arming.disarm("a start of the controller")
 
     # --- inputs -------------------------------------------------------------------------
     def on_arm_state(self, positions: Sequence[float], fault: str) -> None:
@@ -113,10 +128,14 @@ class Controller:
             if fault and not self.fault:
                 self._cancel(RpcError("fault", f"The arm reports a fault: {fault} Reset it, then retry."),
                              "A fault of the arm")
+            elif self.fault and not fault:
+                self.arming.disarm("the fault was cleared")
             self.fault = fault
 
     def on_estop(self, engaged: bool, reason: str) -> None:
         with self._lock:
+            if self.estop and not engaged:
+                self.arming.disarm("the emergency stop was released")
             self.estop, self.estop_reason = bool(engaged), reason
             if engaged:
                 self._cancel(RpcError("estop", f"Stopped by the emergency stop{': ' + reason if reason else ''}."),
@@ -124,6 +143,8 @@ class Controller:
 
     def on_driver(self, alive: bool) -> None:
         with self._lock:
+            if alive and not self.driver_alive:
+                self.arming.disarm("the arm driver appeared")
             self.driver_alive = alive
             if not alive:
                 self.q = None
@@ -163,7 +184,7 @@ class Controller:
         with self._lock:
             q0 = self.check_can_move()
             self._check_idle()
-            if self.state in (MOVV, POINTER):
+            if self.state in STREAMS:
                 self._abort(None)
             return q0, self._epoch
 
@@ -206,13 +227,22 @@ class Controller:
             return planned.plan.duration
 
     def stream(self, velocity: np.ndarray, now: float, mode: str = MOVV) -> None:
-        """Set or refresh a streamed pose velocity (SI); it lapses after COMMAND_WATCHDOG_S seconds."""
+        """Set or refresh a streamed velocity (SI): of the pose, or of the joints in mode MOVJV;
+        it lapses after COMMAND_WATCHDOG_S seconds. Refused ("busy") when it continues a
+        stream from before a recovery (see the module's docstring)."""
         with self._lock:
+            may_move = self.arming.admit("stream", now)   # noted even when refused below
             q0 = self.check_can_move()
             self._check_idle()
+            if not may_move:
+                ms = f"{COMMAND_WATCHDOG_S * 1000:.0f} ms"
+                raise RpcError("busy", f"This {mode} did not move the arm: the controller was re-armed after "
+                                       f"{self.arming.why}, and this request continues a stream of requests that was "
+                                       f"running before; pause it for {ms} (or restart it) to move the arm again.")
             v = np.asarray(velocity, float)
-            if v.shape != (self.model.pose_size,) or not np.all(np.isfinite(v)):
-                raise RpcError("bad_request", f"A velocity needs {self.model.pose_size} finite numbers.")
+            size = self.n if mode == MOVJV else self.model.pose_size
+            if v.shape != (size,) or not np.all(np.isfinite(v)):
+                raise RpcError("bad_request", f"A velocity needs {size} finite numbers.")
             if self.state != mode:
                 self._bump(RpcError("busy", f"A {mode}"))
                 self._stream_pose = np.asarray(self.model.fwd(q0), float)
@@ -224,9 +254,14 @@ class Controller:
             self._stream_seen = now
 
     def stop(self) -> None:
-        """Stop any motion; the arm holds its last reference."""
+        """Stop any motion; the arm holds its last reference. With no motion of its own running,
+        the arm is told to hold where it is measured: `stop` stops the arm whoever moved it."""
         with self._lock:
+            idle = self.state == NOT_CONTROLLING
             self._cancel(None, "A stop")
+            if idle and self.q is not None:
+                self._hold = self.q.copy()
+                self._send_hold = True
 
     def wait(self, timeout: float | None) -> bool:
         """Block until no planned motion runs; False on timeout (the motion keeps running)."""
@@ -244,7 +279,7 @@ class Controller:
                     self._finish(q)
                     return Reference(q.tolist(), [0.0] * self.n)
                 return Reference(self._plan.q_at(t).tolist(), self._plan.qdot_at(t).tolist())
-            if self.state in (MOVV, POINTER):
+            if self.state in STREAMS:
                 return self._stream_tick(now)
             if self._send_hold and self._hold is not None:
                 self._send_hold = False
@@ -257,6 +292,8 @@ class Controller:
             return self.tick(now)
         dt = 0.0 if self._last_tick is None else now - self._last_tick
         self._last_tick = now
+        if self.state == MOVJV:
+            return self._joint_stream_tick(dt)
         target = self._stream_pose + self._stream_vel * dt
         q = self._solve(target)
         if q is None:
@@ -272,6 +309,14 @@ class Controller:
             if np.any(np.abs(qdot) > self.vmax):
                 return self._stream_refused()
         self._stream_pose, self._hold = target, q
+        return Reference(q.tolist(), qdot.tolist())
+
+    def _joint_stream_tick(self, dt: float) -> Reference:
+        """Joints at their streamed speeds (capped at each joint's maximum), stopping at the limits."""
+        qdot = np.clip(self._stream_vel, -self.vmax, self.vmax)
+        q = np.clip(self._hold + qdot * dt, self.lower, self.upper)
+        qdot = (q - self._hold) / dt if dt > 0 else np.zeros(self.n)
+        self._hold = q
         return Reference(q.tolist(), qdot.tolist())
 
     def _solve(self, pose: np.ndarray) -> np.ndarray | None:

@@ -18,6 +18,7 @@ from typing import Protocol, Sequence
 import numpy as np
 
 from asibot.errors import RpcError
+from asibot import poses
 from asibot.poses import point_rotation
 
 from .asibot_solver import AsibotSolver, tool_frame, transform_point
@@ -38,16 +39,13 @@ class KinematicModel(Protocol):
     def from_user_point(self, point: Sequence[float]) -> np.ndarray: ...
 
 
-def _user(pose: Sequence[float]) -> list[float]:
-    p = [float(v) for v in pose]
-    return p[:3] + [math.degrees(p[3]), math.degrees(p[4])]
+_user = poses.user_point
 
 
 def _si(point: Sequence[float]) -> np.ndarray:
     if len(point) != POSE_SIZE or not all(math.isfinite(float(v)) for v in point):
         raise ValueError(f"A point is {POSE_SIZE} finite numbers [x, y, z, rot(y'), rot(z'')], got {list(point)!r}.")
-    p = [float(v) for v in point]
-    return np.array(p[:3] + [math.radians(p[3]), math.radians(p[4])])
+    return np.array(poses.si_pose(point))
 
 
 class AsibotModel:

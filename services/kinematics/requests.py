@@ -259,6 +259,8 @@ def verbs(n_joints: int) -> dict[str, Verb]:
     velocity = Numbers(("vx", "vy", "vz", "w rot(y')", "w rot(z'')"),
                        (Number(-MAX_VELOCITY, MAX_VELOCITY, "m/s"),) * 3
                        + (Number(-MAX_ANGULAR_VELOCITY, MAX_ANGULAR_VELOCITY, "deg/s"),) * 2)
+    joint_velocity = Numbers(tuple(f"w q{i + 1}" for i in range(n_joints)),
+                             (Number(-MAX_ANGULAR_VELOCITY, MAX_ANGULAR_VELOCITY, "deg/s"),) * n_joints)
     tool = Numbers(("x", "y", "z", "rx", "ry", "rz"),
                    (Number(-MAX_TOOL_OFFSET, MAX_TOOL_OFFSET, "m"),) * 3
                    + (Number(-MAX_TOOL_ANGLE, MAX_TOOL_ANGLE, "deg"),) * 3)
@@ -271,6 +273,7 @@ def verbs(n_joints: int) -> dict[str, Verb]:
         "movl": Verb({"point": Field(p, required=True), "duration": DURATION,
                       "speed": Field(Number(MIN_LINEAR_SPEED, MAX_LINEAR_SPEED, "m/s"))}, needs_driver=True),
         "movv": Verb({"velocity": Field(velocity, required=True)}, needs_driver=True),
+        "movjv": Verb({"velocity": Field(joint_velocity, required=True)}, needs_driver=True),
         "relj": Verb({"joints": Field(q, required=True), "duration": DURATION, "speed": JOINT_SPEED},
                      needs_driver=True),
         "home": Verb({"duration": DURATION, "speed": JOINT_SPEED}, needs_driver=True),

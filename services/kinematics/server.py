@@ -9,6 +9,11 @@ Every request is checked by one table, asibot.kinematics.requests: the server se
 its verbs, and each handler receives the checked arguments (a namespace), never the raw map.
 A movj or movl is planned without holding the controller (see asibot.kinematics.controller),
 so `stop`, `stat` and cart/state are answered while a long path is checked.
+
+The server is the controller of the arm and gripper of its robot (asibot.ownership): it
+announces itself with a new identity at every start, and every command it sends carries it.
+It keeps the estop state served after its sender exits (asibot.estop), so a driver restarted
+meanwhile learns it.
 """
 
 from __future__ import annotations
@@ -20,14 +25,15 @@ from typing import Any, Callable
 
 import numpy as np
 
-from asibot import keys
+from asibot import keys, ownership
 from asibot.errors import RpcError
+from asibot.estop import EStopState
 from asibot.messages import ArmCommand, ArmState, CartState, EStop, Event, GripperCommand, GripperState
 from asibot.runtime import Service
 from asibot.timing import Ticker
 
 from . import requests
-from .controller import MOVV, POINTER, Controller
+from .controller import MOVJV, MOVV, POINTER, Controller
 from .pointer import PointerInput, pointer_velocity
 from .requests import MAX_WAIT
 
@@ -61,7 +67,9 @@ class KinematicsServer(Service):
             raise ValueError("--rate must be positive (Hz)")
         self.bus, self.robot, self.model, self.spec = bus, robot, model, spec
         self.rate, self.clock = rate, clock
-        self.ctl = Controller(model, spec)
+        self.ctl = Controller(model, spec, started=clock())
+        #: This controller's identity, in every command it sends (asibot.ownership).
+        self.controller = ownership.new_id("kinematics")
         self.n = len(spec.joint_names)
         self._stop = threading.Event()
         self.ticker = Ticker(rate, stop=self._stop)
@@ -70,7 +78,7 @@ class KinematicsServer(Service):
         self.grip_pub = bus.publisher(keys.gripper_command(robot), GripperCommand)
         self.events = bus.publisher(keys.events(robot), Event)
         bus.subscribe(keys.arm_state(robot), ArmState, self._on_arm_state)
-        bus.subscribe(keys.estop(robot), EStop, self._on_estop, latest=True)
+        self.estop = EStopState(bus, robot, self._on_estop)
         self._grip: GripperState | None = None
         self._grip_changed = threading.Condition()
         bus.subscribe(keys.gripper_state(robot), GripperState, self._on_gripper)
@@ -80,7 +88,7 @@ class KinematicsServer(Service):
         self.verbs = requests.verbs(self.n)
         for verb, spec in self.verbs.items():
             bus.serve(keys.cart_rpc(robot, verb), self._handler(verb, spec, getattr(self, verb)))
-        bus.announce(keys.controller_alive(robot))
+        bus.announce(keys.controller_alive(robot, self.controller))
         self._loop = threading.Thread(target=self._run, name="control-loop", daemon=True)
         self._loop.start()
 
@@ -121,7 +129,8 @@ class KinematicsServer(Service):
         """One control step: the reference for now, if any, goes to the driver."""
         ref = self.ctl.tick(self.clock())
         if ref is not None and self.ctl.driver_alive:
-            self.cmd_pub.put(ArmCommand(mode="position", values=ref.positions, velocities=ref.velocities))
+            self.cmd_pub.put(ArmCommand(mode="position", values=ref.positions, velocities=ref.velocities,
+                                        controller=self.controller))
 
     def _run(self) -> None:
         every = max(1, int(round(self.rate / STATE_RATE)))
@@ -199,6 +208,12 @@ class KinematicsServer(Service):
         self._send()
         return {}
 
+    def movjv(self, a: Any) -> dict:
+        """Stream joint velocities in deg/s (hold-to-move of one joint); repeat within 200 ms."""
+        self.ctl.stream(np.radians(np.asarray(a.velocity, float)), self.clock(), MOVJV)
+        self._send()
+        return {}
+
     def pointer(self, a: Any) -> dict:
         cmd = PointerInput(**vars(a))
         if not cmd.deadman:
@@ -252,7 +267,7 @@ class KinematicsServer(Service):
                                               "gripper, or is not running.")
             before = self._grip
         opening = float(self.spec.gripper_max_opening) if a.action == "open" else 0.0
-        self.grip_pub.put(GripperCommand(opening=opening))
+        self.grip_pub.put(GripperCommand(opening=opening, controller=self.controller))
         state = self._gripper_settled(opening, before)
         return {"opening": state.opening, "holding": state.holding}
 
@@ -297,7 +312,8 @@ class KinematicsServer(Service):
 
     # --- lifecycle ----------------------------------------------------------------------
     def health(self) -> dict:
-        return {"state": self.ctl.state, "driver": self.ctl.driver_alive, "jitter": self.ticker.stats()}
+        return {"state": self.ctl.state, "driver": self.ctl.driver_alive, "controller": self.controller,
+                "jitter": self.ticker.stats()}
 
     def close(self) -> None:
         self.ctl.stop()

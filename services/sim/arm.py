@@ -95,6 +95,27 @@ class JointTracker:
         """Accept a command or raise CommandRejected (and change nothing: the arm keeps its
         previous motion). BadCommand for a value beyond a joint's limits or max speed, or not
         finite: refused whole, never clipped. `q_measured` is where the joints are now."""
+        values, ff = self.check(cmd, q_measured)
+        if self.estop:
+            raise CommandRejected("the emergency stop is engaged; release it before moving the arm")
+        if self.mode == "fault":
+            raise CommandRejected(f"the arm is in fault ({self.fault}); call reset_fault first")
+        self._command_time = now
+        self._watchdog_fired = False
+        # Only the tolerated noise (or a way back from outside the limits) is clipped here.
+        if cmd.mode == "position":
+            self.mode = "position"
+            self._target = np.clip(values, self.limits.lower, self.limits.upper)
+            self._feedforward = None if ff is None else np.clip(ff, -self.limits.max_velocity,
+                                                               self.limits.max_velocity)
+            self._velocity[:] = 0.0
+        else:
+            self.mode = "velocity"
+            self._target = None
+            self._velocity = np.clip(values, -self.limits.max_velocity, self.limits.max_velocity)
+
+    def check(self, cmd: ArmCommand, q_measured: Sequence[float] | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+        """The command's values and feed-forward if every one is allowed; BadCommand if not."""
         if len(cmd.values) != self.n:
             raise BadCommand("malformed",
                              f"arm command has {len(cmd.values)} values but the arm has {self.n} joints "
@@ -114,23 +135,7 @@ class JointTracker:
                 self._within_speeds(ff, "velocity feed-forward")
         else:
             self._within_speeds(values, "velocity")
-        if self.estop:
-            raise CommandRejected("the emergency stop is engaged; release it before moving the arm")
-        if self.mode == "fault":
-            raise CommandRejected(f"the arm is in fault ({self.fault}); call reset_fault first")
-        self._command_time = now
-        self._watchdog_fired = False
-        # Only the tolerated noise (or a way back from outside the limits) is clipped here.
-        if cmd.mode == "position":
-            self.mode = "position"
-            self._target = np.clip(values, self.limits.lower, self.limits.upper)
-            self._feedforward = None if ff is None else np.clip(ff, -self.limits.max_velocity,
-                                                               self.limits.max_velocity)
-            self._velocity[:] = 0.0
-        else:
-            self.mode = "velocity"
-            self._target = None
-            self._velocity = np.clip(values, -self.limits.max_velocity, self.limits.max_velocity)
+        return values, ff
 
     def _within_limits(self, values: np.ndarray, q_measured: Sequence[float] | None) -> None:
         lo, hi = self.limits.lower, self.limits.upper
@@ -156,14 +161,17 @@ class JointTracker:
                 raise BadCommand("speed_limit", f"joint {self.limits.names[j]} {what} {quantity(v, 'rad/s', m)} "
                                                 f"is beyond its max speed {quantity(m, 'rad/s', abs(v))}")
 
-    def set_estop(self, engaged: bool, reason: str = "", stopped: str = "the arm is holding its position") -> None:
-        """Latch or release the emergency stop; engaging stops the arm where it is."""
+    def set_estop(self, engaged: bool, reason: str = "", stopped: str = "the arm is holding its position",
+                  by: str = "") -> None:
+        """Latch or release the emergency stop; engaging stops the arm where it is. `by` says who."""
+        who = f" by {by}" if by else ""
         if engaged and not self.estop:
             self.hold()
             self.notify(Notice("warning", "estop",
-                               f"Emergency stop engaged{': ' + reason if reason else ''}; {stopped}."))
+                               f"Emergency stop engaged{who}{': ' + reason if reason else ''}; {stopped}."))
         elif not engaged and self.estop:
-            self.notify(Notice("info", "estop_released", "Emergency stop released; the robot accepts commands again."))
+            self.notify(Notice("info", "estop_released",
+                               f"Emergency stop released{who}{': ' + reason if reason else ''}."))
         self.estop = engaged
 
     def hold(self) -> None:

@@ -41,6 +41,15 @@ class BaseDrive:
     _watchdog_fired: bool = True
 
     def command(self, vx: float, wz: float, now: float) -> None:
+        self.check(vx, wz)
+        if self.estop:
+            raise CommandRejected("the emergency stop is engaged; release it before driving")
+        self._goal = (float(np.clip(vx, -MAX_VX, MAX_VX)), float(np.clip(wz, -MAX_WZ, MAX_WZ)))
+        self._command_time = now
+        self._watchdog_fired = False
+
+    def check(self, vx: float, wz: float) -> None:
+        """BadCommand when vx or wz is not finite or beyond the P3-AT's max speeds."""
         for name, v in (("vx", vx), ("wz", wz)):
             if not math.isfinite(v):
                 raise BadCommand("not_finite", f"{name} is {quantity(v)}, not a finite number")
@@ -48,11 +57,6 @@ class BaseDrive:
             if abs(v) > limit * (1.0 + SPEED_TOLERANCE):
                 raise BadCommand("speed_limit", f"{name} {quantity(v, unit, limit)} is beyond the P3-AT's max {what} "
                                                 f"{quantity(limit, unit, abs(v))}")
-        if self.estop:
-            raise CommandRejected("the emergency stop is engaged; release it before driving")
-        self._goal = (float(np.clip(vx, -MAX_VX, MAX_VX)), float(np.clip(wz, -MAX_WZ, MAX_WZ)))
-        self._command_time = now
-        self._watchdog_fired = False
 
     def set_estop(self, engaged: bool) -> None:
         """Latch or release; engaging stops at once. (The robot reports the estop once, not here.)"""

@@ -3,7 +3,10 @@
 Physics runs on its own thread (2 ms steps, in 10 ms batches paced by the wall clock, or
 back to back with `fast`); cameras render on another thread from a private copy of the
 configuration, so a slow frame never delays the 100 Hz arm state. All logic lives in
-`Simulation`; this class only moves messages between it and the bus.
+`Simulation`; this class only moves messages between it and the bus, and keeps the two
+bus-facing safety rules of a driver: only the controller that holds a part moves it
+(asibot.ownership: the arm and gripper, the base), and the estop state is kept served after
+its sender exits (asibot.estop).
 """
 
 from __future__ import annotations
@@ -20,10 +23,12 @@ from asibot import keys
 from asibot import messages as m
 from asibot.bus import Bus
 from asibot.errors import MessageError, RpcError
-from asibot.events import EventThrottle, refusal_reason
+from asibot.estop import EStopState
+from asibot.events import CommandRefused, EventThrottle, refusal_reason
+from asibot.ownership import Holder
 from asibot.runtime import Service
 from asibot.sim import viewer
-from asibot.sim.arm import BadCommand, CommandRejected, Notice
+from asibot.sim.arm import CommandRejected, Notice
 from asibot.sim.cameras import Camera
 from asibot.sim.scene import WORLDS
 from asibot.sim.simulation import Simulation, world_for
@@ -77,6 +82,10 @@ class SimService(Service):
         self._refusals = EventThrottle(self._pub_event.put)
         self._frames = 0
         self._rtf = 0.0
+        self.holders = {part: Holder(rid, part, on_change=lambda h, part=part: self.sim.set_controller(part, h))
+                        for part in (("arm", "base") if sim.base else ("arm",))}
+        for holder in self.holders.values():
+            holder.follow(bus)
         bus.subscribe(keys.arm_command(rid), m.ArmCommand, self._on_arm_command,
                       on_reject=lambda k, exc: self._malformed("arm", k, exc))
         bus.subscribe(keys.gripper_command(rid), m.GripperCommand, self._on_gripper_command,
@@ -84,8 +93,7 @@ class SimService(Service):
         if sim.base:
             bus.subscribe(keys.base_cmd_vel(rid), m.Twist, self._on_cmd_vel,
                           on_reject=lambda k, exc: self._malformed("cmd_vel", k, exc))
-        bus.subscribe(keys.estop(rid), m.EStop, self._on_estop, latest=True)
-        bus.watch(keys.controller_alive(rid), self._on_controller)
+        self.estop = EStopState(bus, rid, self._on_estop)
         for verb, handler in {"status": self._rpc_status, "reset_fault": self._rpc_reset_fault,
                               "reset_world": self._rpc_reset_world,
                               "set_object_pose": self._rpc_set_object_pose,
@@ -105,51 +113,71 @@ class SimService(Service):
            "gripper": "Gripper command refused, the gripper keeps its previous opening",
            "cmd_vel": "Base command refused, the base keeps its previous motion"}
 
+    #: The part of the robot each command topic moves, and whose holder it must come from.
+    PART = {"arm": "arm", "gripper": "arm", "cmd_vel": "base"}
+
     def _malformed(self, topic: str, key: str, exc: MessageError) -> None:
         self._reject(topic, refusal_reason(exc), f"{self.WHO[topic]}: {exc}")
 
-    def _reject(self, topic: str, reason: str, text: str) -> None:
+    def _reject(self, topic: str, reason: str, text: str, level: str = "error", code: str = "bad_command") -> None:
         self._commands_rejected += 1
         text = f"{text.rstrip('.')}."
-        if self._refusals.event("error", "bad_command", text, reason=f"{topic}:{reason}"):
+        if self._refusals.event(level, code, text, reason=f"{topic}:{reason}"):
             log.warning("%s", text)
 
-    def _ignored(self, topic: str, exc: CommandRejected) -> None:
-        """Bad values are refused with an Event; commands refused because of the state are
-        logged, not shouted, during an estop."""
-        if self.sim.estop and not isinstance(exc, BadCommand):
+    def _ignored(self, topic: str, exc: ValueError) -> None:
+        """Bad values, strangers' commands and streams from before a recovery are refused with
+        an Event; commands refused because of the state are logged, not shouted, during an estop."""
+        if self.sim.estop and not isinstance(exc, CommandRefused):
             log.debug("ignored a command: %s", exc)
+        elif isinstance(exc, CommandRefused):
+            self._reject(topic, exc.reason, f"{self.WHO[topic]}: {exc}", exc.level, exc.code)
         else:
             self._reject(topic, exc.reason, f"{self.WHO[topic]}: {exc}")
 
+    def _holds(self, topic: str, controller: str) -> bool:
+        """Whether `controller` holds the part `topic` moves; if not, the command is noted
+        (a stream of the next holder must not move the part at once) and refused."""
+        part = self.PART[topic]
+        refused = self.holders[part].refusal(controller)
+        if refused is None:
+            return True
+        if topic != "gripper":
+            self.sim.heard(part, controller)
+        self._ignored(topic, refused)
+        return False
+
     def _on_arm_command(self, cmd: m.ArmCommand) -> None:
+        if not self._holds("arm", cmd.controller):
+            return
         try:
             self.sim.command_arm(cmd)
-        except CommandRejected as exc:
+        except (CommandRejected, CommandRefused) as exc:
             self._ignored("arm", exc)
 
     def _on_gripper_command(self, cmd: m.GripperCommand) -> None:
+        if not self._holds("gripper", cmd.controller):
+            return
         try:
             self.sim.command_gripper(cmd.opening)
-        except CommandRejected as exc:
+        except (CommandRejected, CommandRefused) as exc:
             self._ignored("gripper", exc)
 
     def _on_cmd_vel(self, cmd: m.Twist) -> None:
+        if not self._holds("cmd_vel", cmd.controller):
+            return
         try:
-            self.sim.command_base(cmd.vx, cmd.wz)
-        except CommandRejected as exc:
+            self.sim.command_base(cmd.vx, cmd.wz, cmd.controller)
+        except (CommandRejected, CommandRefused) as exc:
             self._ignored("cmd_vel", exc)
 
     def _on_estop(self, msg: m.EStop) -> None:
-        self.sim.set_estop(msg.engaged, msg.reason)
-
-    def _on_controller(self, key: str, alive: bool) -> None:
-        if not alive:
-            self.sim.controller_lost()
+        self.sim.set_estop(msg.engaged, msg.reason, msg.by)
 
     # ------------------------------------------------------------------ RPC
     def _rpc_status(self, req: dict) -> dict:
-        return self.sim.status()
+        return {**self.sim.status(), "controller": self.holders["arm"].current or "",
+                **({"base_controller": self.holders["base"].current or ""} if "base" in self.holders else {})}
 
     def _rpc_reset_fault(self, req: dict) -> dict:
         self.sim.reset_fault()

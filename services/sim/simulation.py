@@ -4,6 +4,11 @@ This class knows nothing about Zenoh: the service (service.py) feeds it commands
 its state, and tests drive it directly, stepping as fast as the CPU allows. All times are
 simulation time (`data.time`), so the 200 ms watchdog means 200 ms of simulated time in
 both real-time and fast mode. Thread-safe: every public method takes the lock.
+
+The sim keeps the driver contract's safety rules like a hardware driver: whose commands it
+obeys is decided by the service (asibot.ownership); after an estop release, a fault reset or
+a change of controller, a stream of arm or base commands from before moves nothing until it
+pauses for a watchdog period (asibot.arming, on the sim's clock).
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ import mujoco
 import numpy as np
 
 from asibot import messages as m
+from asibot.arming import Arming
 from asibot.sim import sensors
 from asibot.sim.arm import BadCommand, CommandRejected, JointLimits, JointTracker, Notice
 from asibot.sim.base import BaseDrive, Odometer
@@ -64,6 +70,8 @@ class Simulation:
         self.battery = sensors.Battery()
         self.places = load_places(self.world)
         self.estop = False
+        # Re-arming of each part after a recovery; a sim starts armed, as a driver does.
+        self.arming = {"arm": Arming(), "base": Arming()}
         self._odom_acc = 0.0
         self._odom_sum = np.zeros(2)
         self._steps = 0
@@ -100,9 +108,15 @@ class Simulation:
     # ------------------------------------------------------------------ commands
     def command_arm(self, cmd: m.ArmCommand) -> None:
         """Raises CommandRejected (nothing changes) for a bad or forbidden command: BadCommand
-        for a value beyond a joint's limits or max speed, or not finite (refused, not clipped)."""
+        for a value beyond a joint's limits or max speed, or not finite (refused, not clipped);
+        arming.NotReady for a command that continues a stream from before the last recovery."""
         with self.lock:
-            self.arm.command(cmd, self.time, q_measured=self.data.qpos[self.scene.arm_qpos])
+            q = self.data.qpos[self.scene.arm_qpos]
+            if not self.arming["arm"].admit(cmd.controller, self.time) and not self.estop \
+                    and self.arm.mode != "fault":
+                self.arm.check(cmd, q)   # a bad value is refused as such
+                raise self.arming["arm"].refusal("the arm")
+            self.arm.command(cmd, self.time, q_measured=q)
 
     def command_gripper(self, opening: float) -> None:
         if not math.isfinite(opening):
@@ -112,32 +126,65 @@ class Simulation:
                 raise CommandRejected("the emergency stop is engaged; release it before using the gripper")
             self.gripper_goal = float(np.clip(opening, 0.0, self.scene.gripper.max_opening))
 
-    def command_base(self, vx: float, wz: float) -> None:
+    def command_base(self, vx: float, wz: float, controller: str = "") -> None:
+        """As command_arm, for a Twist of `controller`."""
         with self.lock:
             if self.base is None:
                 raise BadCommand("no_base", f"{self.robot.robot_id} has no mobile base")
+            if not self.arming["base"].admit(controller, self.time) and not self.estop:
+                self.base.check(vx, wz)
+                raise self.arming["base"].refusal("the base")
             self.base.command(vx, wz, self.time)
 
-    def set_estop(self, engaged: bool, reason: str = "") -> None:
+    def heard(self, part: str, controller: str) -> None:
+        """A command of a controller that does not hold `part` ("arm", "base"; refused by the
+        service): noted, so that its stream does not move the part the moment it takes over."""
         with self.lock:
+            self.arming[part].heard(controller, self.time)
+
+    def set_estop(self, engaged: bool, reason: str = "", by: str = "") -> None:
+        with self.lock:
+            released = self.estop and not engaged
             self.estop = engaged
             stopped = "the base stopped and the arm is holding its position" if self.base else \
                 "the arm is holding its position"
-            self.arm.set_estop(engaged, reason, stopped)
+            self.arm.set_estop(engaged, reason, stopped, by)
             if self.base:
                 self.base.set_estop(engaged)
+            if released:
+                for part in self._parts():
+                    self._recovered(part, "the emergency stop was released" + (f" by {by}" if by else ""))
 
-    def controller_lost(self) -> None:
-        """The Cartesian controller vanished: stop the arm if it is moving."""
+    def set_controller(self, part: str, holder: str | None) -> None:
+        """The controller that holds `part` ("arm", "base") changed (asibot.ownership): stop the
+        part if it is moving, and re-arm it for the new holder, if any."""
         with self.lock:
-            if np.any(np.abs(self.data.qvel[self.scene.arm_dof]) > 1e-3) or self.arm.mode == "velocity":
+            if part == "arm" and (np.any(np.abs(self.data.qvel[self.scene.arm_dof]) > 1e-3)
+                                  or self.arm.mode == "velocity"):
                 self.arm.hold()
                 self.notices.put(Notice("warning", "controller_lost",
-                                        "The arm controller disappeared; the arm stopped."))
+                                        "The controller of the arm changed or disappeared; the arm stopped."))
+            if part == "base" and self.base is not None and (self.base.vx, self.base.wz) != (0.0, 0.0):
+                self.base.stop()
+                self.notices.put(Notice("warning", "controller_lost",
+                                        "The controller of the base changed or disappeared; the base stopped."))
+            if holder is None:
+                self.arming[part].disarm("its controller disappeared")
+            else:
+                self._recovered(part, f"controller {holder!r} took hold of it")
 
     def reset_fault(self) -> None:
         with self.lock:
             self.arm.reset_fault(self.data.qpos[self.scene.arm_qpos])
+            self._recovered("arm", "the fault was reset")
+
+    def _parts(self) -> tuple[str, ...]:
+        return ("arm", "base") if self.base else ("arm",)
+
+    def _recovered(self, part: str, why: str) -> None:
+        """Under the lock: after a recovery only a new stream moves `part`; say it is ready."""
+        self.arming[part].disarm(why)
+        self.notices.put(Notice("info", "ready", self.arming[part].ready_text(f"The {part}")))
 
     def set_object_pose(self, name: str, pos: list[float], quat: list[float] | None = None) -> None:
         """Teleport a free object (tests, demos); releases it from the gripper first."""

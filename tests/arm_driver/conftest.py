@@ -1,5 +1,6 @@
 """Fixtures: a private virtual CAN channel with the five emulated drives, a sniffer on it,
-and the arm driver (without Zenoh) whose states and events are captured."""
+and the arm driver (without Zenoh) whose states and events are captured; and the whole
+service on the in-memory bus with a controller that holds the arm (`arm`)."""
 
 from __future__ import annotations
 
@@ -10,9 +11,16 @@ from dataclasses import dataclass, field
 import can
 import pytest
 
+from asibot import keys, ownership
 from asibot.arm_driver import config, emulator
 from asibot.arm_driver.driver import ArmDriver
 from asibot.arm_driver.master import CanopenMaster
+from asibot.arm_driver.service import ArmDriverService
+from asibot.bus import Bus
+from asibot.messages import ArmState, Event
+from asibot.testing import Inbox, wait_until
+
+R = "asibot"
 
 
 class Sniffer(can.Listener):
@@ -115,3 +123,40 @@ def _close(r: Rig) -> None:
         r.master.close()
     r.emu.close()
     r.sniffer.close()
+
+
+@dataclass
+class ArmOnBus:
+    """The arm driver service and a user on the in-memory bus; `controller` is the id of a
+    controller (announced on `controller_bus`: close it and it vanishes) that holds the arm:
+    the commands of the tests carry it (asibot.ownership)."""
+    svc: ArmDriverService
+    user: Bus
+    states: Inbox
+    events: Inbox
+    controller: str
+    controller_bus: Bus
+
+    def codes(self) -> list[str]:
+        return [e.code for e in self.events.all()]
+
+
+@pytest.fixture
+def arm(memory_bus):
+    """The arm driver service with its five emulated drives, idle, on the in-memory bus."""
+    svc_bus, user = Bus("arm_driver"), Bus("test")
+    svc = ArmDriverService(svc_bus, R, "emulated")
+    states, events = Inbox(), Inbox()
+    user.subscribe(keys.arm_state(R), ArmState, states)
+    user.subscribe(keys.events(R), Event, events)
+    controller_bus = Bus("test-controller")
+    controller = ownership.announce(controller_bus, R, "arm", "test")
+    try:
+        wait_until(lambda: len(states) and states.last().mode == "idle", 15, message="the arm driver did not start")
+        wait_until(lambda: svc.holder.current == controller, 5, message="the driver never saw the controller")
+        yield ArmOnBus(svc, user, states, events, controller, controller_bus)
+    finally:
+        controller_bus.close()
+        user.close()
+        svc.close()
+        svc_bus.close()

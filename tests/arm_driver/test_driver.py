@@ -10,7 +10,9 @@ import can
 import pytest
 
 from asibot.arm_driver.driver import FaultError
-from asibot.testing import wait_until
+from asibot.arming import NotReady
+from asibot.messages import COMMAND_WATCHDOG_S
+from asibot.testing import Stream, wait_until
 
 V = math.radians(25)
 FAR = [1.0, 0.5, -0.5, 0.3, -1.0]
@@ -99,6 +101,7 @@ def test_estop_holds_ignores_commands_and_resumes_after_release(rig):
     settles(rig)
     held = rig.emu.positions()[1]
     assert abs(held - at_estop) < 0.3 * 0.2
+    time.sleep(COMMAND_WATCHDOG_S)    # the next command is a new request, not FAR's stream (asibot.arming)
     d.set_estop(False)
     assert d.command("position", [held + 0.01, 0, 0, 0, 0])
     wait_until(lambda: abs(rig.emu.positions()[1] - (held + 0.01)) < 1e-4, 3)
@@ -198,11 +201,11 @@ def test_an_adapter_that_refuses_to_send_is_a_fault(rig):
 
 def test_controller_loss_stops_a_moving_arm(rig):
     d = up(rig)
-    d.set_controller_alive(True)
-    d.command("position", FAR)
+    d.set_controller("kinematics-1")
+    d.command("position", FAR, controller="kinematics-1")
     time.sleep(0.05)
     before = rig.emu.positions()
-    d.set_controller_alive(False)
+    d.set_controller(None)
     assert "controller_lost" in rig.event_codes()
     settles(rig)
     after = rig.emu.positions()
@@ -248,3 +251,58 @@ def test_a_stalled_driver_does_not_blame_the_drives_but_a_dead_bus_is_a_fault(ri
         rig.emu.silent(n)
     wait_until(lambda: rig.last.mode == "fault", 2)
     assert rig.last.fault.startswith("No drive has said anything on CAN for 0.3")
+
+
+def stays_still(rig, seconds: float) -> None:
+    """Every emulated joint stays where it is, sampled throughout `seconds`."""
+    here, end = rig.emu.positions(), time.monotonic() + seconds
+    while time.monotonic() < end:
+        now = rig.emu.positions()
+        assert max(abs(now[n] - here[n]) for n in here) < 1e-4, "the arm moved"
+        time.sleep(0.02)
+
+
+@pytest.mark.parametrize("recovery", ["estop released", "fault reset", "new controller"])
+def test_a_stream_running_through_a_recovery_moves_nothing_until_it_pauses(rig, recovery):
+    """Issue 10, finding 4: a velocity stream that keeps coming through an estop, a fault or a
+    change of controller must not move the arm by itself afterwards; it must pause for one
+    watchdog period (a new request) first, and an Event says the arm is ready again."""
+    d = up(rig)
+    holder = ["kinematics-a"]
+    d.set_controller(holder[0])
+    sender = "kinematics-b" if recovery == "new controller" else "kinematics-a"
+
+    def send() -> None:         # what the service does: only the holder's commands reach the arm
+        if sender == holder[0]:
+            d.command("velocity", [0.2, 0, 0, 0, 0], controller=sender)
+        else:
+            d.heard(sender)
+
+    stream = Stream(send)
+    try:
+        if recovery != "new controller":
+            wait_until(lambda: rig.last.velocities[0] > 0.1, 3, message="the stream did not move the arm")
+        if recovery == "estop released":
+            d.set_estop(True, "test")
+        elif recovery == "fault reset":
+            rig.emu.over_current(3)
+            wait_until(lambda: rig.last.mode == "fault", 2)
+        settles(rig)
+        recovered = time.monotonic()
+        if recovery == "estop released":
+            d.set_estop(False, by="a tester")
+        elif recovery == "fault reset":
+            d.reset_fault()
+        else:
+            holder[0] = "kinematics-b"
+            d.set_controller("kinematics-b")
+        assert "ready" in rig.event_codes()
+        stays_still(rig, 0.6)                       # the stream goes on: nothing moves
+        assert stream.longest_gap(recovered) < COMMAND_WATCHDOG_S / 2, "the machine paused the stream itself"
+        assert any(isinstance(e, NotReady) for e in stream.errors)
+        stream.pause()
+        time.sleep(COMMAND_WATCHDOG_S)              # a pause of one watchdog period ...
+        stream.resume()                             # ... and the same stream is a new request
+        wait_until(lambda: rig.last.velocities[0] > 0.1, 3, message="the restarted stream did not move the arm")
+    finally:
+        stream.close()

@@ -11,32 +11,14 @@ import time
 import pytest
 
 from asibot import keys, messages
-from asibot.arm_driver.service import ArmDriverService
-from asibot.bus import Bus
 from asibot.events import stands_for
-from asibot.messages import ArmCommand, ArmState, Event
+from asibot.messages import ArmCommand, Event
 from asibot.testing import Inbox, wait_until
 
-R = "asibot"
+from .conftest import R
+
 Q2_UPPER = math.radians(135)
 VMAX = math.radians(25)
-
-
-
-@pytest.fixture
-def arm(memory_bus):
-    svc_bus, user = Bus("arm_driver"), Bus("test")
-    svc = ArmDriverService(svc_bus, R, "emulated")
-    states, events = Inbox(), Inbox()
-    user.subscribe(keys.arm_state(R), ArmState, states)
-    user.subscribe(keys.events(R), Event, events)
-    try:
-        wait_until(lambda: len(states) and states.last().mode == "idle", 15, message="the arm driver did not start")
-        yield svc, user, states, events
-    finally:
-        user.close()
-        svc.close()
-        svc_bus.close()
 
 
 def refusals(events: Inbox) -> list[Event]:
@@ -71,9 +53,9 @@ def assert_still(svc, states: Inbox, before: list[float], n: int = 30) -> None:
     ({"mode": "position", "values": [math.nan, 0.0, 0.0, 0.0, 0.0]}, "not finite"),
 ])
 def test_a_command_beyond_the_limits_is_refused_with_an_event_and_nothing_moves(arm, payload, says):
-    svc, user, states, events = arm
+    svc, user, states, events = arm.svc, arm.user, arm.states, arm.events
     before = states.last().positions
-    user.put_raw(keys.arm_command(R), messages.pack(payload))
+    user.put_raw(keys.arm_command(R), messages.pack({**payload, "controller": arm.controller}))
     wait_until(lambda: refusals(events), 5, message="no bad_command event")
     event = refusals(events)[0]
     assert event.level == "error"
@@ -84,11 +66,11 @@ def test_a_command_beyond_the_limits_is_refused_with_an_event_and_nothing_moves(
 
 
 def test_a_refused_command_does_not_interrupt_the_motion_under_way(arm):
-    svc, user, states, events = arm
-    cmd = user.publisher(keys.arm_command(R), ArmCommand)
-    cmd.put(ArmCommand(mode="position", values=[0.3, 0.0, 0.0, 0.0, 0.0]))   # 0.7 s at 25 deg/s
+    states, events, c = arm.states, arm.events, arm.controller
+    cmd = arm.user.publisher(keys.arm_command(R), ArmCommand)
+    cmd.put(ArmCommand(mode="position", values=[0.3, 0.0, 0.0, 0.0, 0.0], controller=c))   # 0.7 s at 25 deg/s
     wait_until(lambda: states.last().velocities[0] > 0.1, 5)
-    cmd.put(ArmCommand(mode="position", values=[1e300] * 5))
+    cmd.put(ArmCommand(mode="position", values=[1e300] * 5, controller=c))
     wait_until(lambda: refusals(events), 5)
     assert states.last().positions[0] < 0.3 and states.last().mode == "position"
     wait_until(lambda: abs(states.last().positions[0] - 0.3) < 1e-4, 5, message="the motion stopped")
@@ -100,11 +82,11 @@ def test_a_refused_command_does_not_interrupt_the_motion_under_way(arm):
 def test_the_planners_noise_at_a_limit_is_not_refused(arm):
     """A position a few micro-radians past a limit (a hold at a measured position, half an
     encoder count off) is clamped to the limit, without an event."""
-    svc, user, states, events = arm
+    svc, states, events = arm.svc, arm.states, arm.events
     svc.driver.ref.vmax = [v * 20 for v in svc.driver.ref.vmax]       # get to the limit quickly
     svc.emulator.drives[2].max_speed_counts *= 20
-    cmd = user.publisher(keys.arm_command(R), ArmCommand)
-    cmd.put(ArmCommand(mode="position", values=[0.0, Q2_UPPER + 5e-6, 0.0, 0.0, 0.0]))
+    cmd = arm.user.publisher(keys.arm_command(R), ArmCommand)
+    cmd.put(ArmCommand(mode="position", values=[0.0, Q2_UPPER + 5e-6, 0.0, 0.0, 0.0], controller=arm.controller))
     wait_until(lambda: abs(states.last().positions[1] - Q2_UPPER) < 1e-4, 5)
     start = len(states)
     wait_until(lambda: len(states) >= start + 20, 5)
@@ -113,12 +95,12 @@ def test_the_planners_noise_at_a_limit_is_not_refused(arm):
 
 
 def test_a_burst_of_300_bad_commands_gives_one_event_a_second_with_the_count(arm):
-    svc, user, states, events = arm
+    svc, states, events = arm.svc, arm.states, arm.events
     before = states.last().positions
-    cmd = user.publisher(keys.arm_command(R), ArmCommand)
+    cmd = arm.user.publisher(keys.arm_command(R), ArmCommand)
     t0 = time.monotonic()
     for i in range(300):        # every one different, as a fuzzer sends them
-        cmd.put(ArmCommand(mode="position", values=[10.0 + i, 0.0, 0.0, 0.0, 0.0]))
+        cmd.put(ArmCommand(mode="position", values=[10.0 + i, 0.0, 0.0, 0.0, 0.0], controller=arm.controller))
     sent_in = time.monotonic() - t0
 
     def accounted() -> int:

@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from asibot import keys, messages
+from asibot import keys, messages, ownership
 from asibot.bus import Bus
 from asibot.errors import RpcError
 from asibot.messages import ArmCommand, ArmState, EStop, Event
@@ -48,16 +48,21 @@ def test_driver_contract_end_to_end(driver_process):
     time.sleep(0.5)
     assert len(states) - n >= 25
 
-    # Positions through Zenoh -> CAN -> emulated drives -> TPDO -> arm/state.
+    # Positions through Zenoh -> CAN -> emulated drives -> TPDO -> arm/state, from the
+    # controller that holds the arm (asibot.ownership).
+    controller = Bus("fake-controller", wait=5)
+    c = ownership.announce(controller, R, "arm", "test")
+    wait_until(lambda: bus.call(keys.driver_rpc(R, "status"))["controller"] == c, 5)
     cmd = bus.publisher(keys.arm_command(R), ArmCommand)
     assert cmd.wait_for_subscribers(5)
     goal = [0.03, -0.02, 0.01, 0.0, 0.02]
-    cmd.put(ArmCommand(mode="position", values=goal))
+    cmd.put(ArmCommand(mode="position", values=goal, controller=c))
     wait_until(lambda: all(abs(p - g) < 1e-4 for p, g in zip(states[-1].positions, goal)), 5)
 
     # A command with the wrong number of joints, or a NaN, is rejected with an Event.
-    cmd.put(ArmCommand(mode="position", values=[0.5, 0.5]))
-    bus.put_raw(keys.arm_command(R), messages.pack({"mode": "position", "values": [math.nan, 0, 0, 0, 0]}))
+    cmd.put(ArmCommand(mode="position", values=[0.5, 0.5], controller=c))
+    bus.put_raw(keys.arm_command(R), messages.pack({"mode": "position", "values": [math.nan, 0, 0, 0, 0],
+                                                    "controller": c}))
     wait_until(lambda: sum(e.code == "bad_command" for e in events) >= 2, 3)
     time.sleep(0.1)
     assert all(abs(p - g) < 1e-4 for p, g in zip(states[-1].positions, goal))
@@ -65,7 +70,7 @@ def test_driver_contract_end_to_end(driver_process):
     # Estop (latched) holds and ignores commands; released, commands work again.
     bus.latch(keys.estop(R), EStop(engaged=True, reason="test"))
     wait_until(lambda: any(e.code == "estop" for e in events), 3)
-    cmd.put(ArmCommand(mode="position", values=[0.2] * 5))
+    cmd.put(ArmCommand(mode="position", values=[0.2] * 5, controller=c))
     time.sleep(0.2)
     assert all(abs(p - g) < 1e-4 for p, g in zip(states[-1].positions, goal))
     bus.latch(keys.estop(R), EStop(engaged=False))
@@ -99,10 +104,7 @@ def test_driver_contract_end_to_end(driver_process):
     assert states[-1].positions[2] == pytest.approx(here, abs=math.radians(360 / 4096))
 
     # The controller's liveliness vanishing mid-motion stops the arm.
-    controller = Bus("fake-controller", wait=5)
-    controller.announce(keys.controller_alive(R))
-    time.sleep(0.2)
-    cmd.put(ArmCommand(mode="position", values=[1.0, 0, 0, 0, 0]))
+    cmd.put(ArmCommand(mode="position", values=[1.0, 0, 0, 0, 0], controller=c))
     wait_until(lambda: states[-1].velocities[0] > 0.1, 3)
     controller.close()
     wait_until(lambda: any(e.code == "controller_lost" for e in events), 3)

@@ -16,6 +16,7 @@ from asibot.base_driver.emulator import ArcosEmulator
 from asibot.base_driver.sip import parse_sip
 from asibot.errors import RpcError
 from asibot.events import CommandRefused
+from asibot.messages import COMMAND_WATCHDOG_S
 from asibot.testing import wait_until
 
 
@@ -129,6 +130,7 @@ def test_estop_sends_e_stop_and_refuses_motion_until_released(rig):
     assert rec.codes().count("estop") == 1
     drv.set_estop(True, "again")                   # latched: no second event
     assert rec.codes().count("estop") == 1
+    time.sleep(COMMAND_WATCHDOG_S)                 # the next cmd_vel is a new request (asibot.arming)
     drv.set_estop(False)
     assert drv.cmd_vel(0.3, 0.0) is True
     wait_until(lambda: emu.robot.target_vel == 300, 1)
@@ -148,8 +150,8 @@ def test_pulled_cable_reconnects_and_the_base_was_stopped_meanwhile(rig):
     wait_until(lambda: emu.robot.watchdog_tripped and emu.robot.vel == 0, 3.5,
                message="the Pioneer's own watchdog did not stop it")
     assert not drv.connected                      # stopped meanwhile, while the cable was out
-    wait_until(lambda: drv.connected, 6, message="the driver did not reconnect")
-    assert rec.codes()[-1] == "connected" and emu.connections == 2
+    wait_until(lambda: rec.codes()[-2:] == ["connected", "ready"], 6, message="the driver did not reconnect")
+    assert emu.connections == 2
     time.sleep(0.5)
     assert emu.robot.target_vel == 0 and emu.robot.vel == 0    # the old velocity did not come back
     assert rec.states[-1].vx == 0
@@ -183,7 +185,7 @@ def test_a_silent_controller_is_a_disconnect_then_a_reconnect(rig):
     drv, emu, rec = rig
     emu.go_silent(1.0)
     wait_until(lambda: "disconnected" in rec.codes(), 2)
-    wait_until(lambda: drv.connected and rec.codes()[-1] == "connected", 6)
+    wait_until(lambda: drv.connected and rec.codes()[-2:] == ["connected", "ready"], 6)
 
 
 def test_reset_fault_enables_the_motors(rig):

@@ -11,30 +11,11 @@ import time
 import pytest
 
 from asibot import keys, messages
-from asibot.base_driver.service import BaseDriverService
-from asibot.bus import Bus
 from asibot.events import stands_for
-from asibot.messages import Event, Odometry, Twist
+from asibot.messages import Event, Twist
 from asibot.testing import Inbox, wait_until
 
-ROBOT = "pioneer"
-
-
-
-@pytest.fixture
-def base(memory_bus, emulator):
-    svc_bus, user = Bus("base_driver"), Bus("test")
-    svc = BaseDriverService(svc_bus, ROBOT, emulator.url)      # --max-vx 0.5, --max-wz 100 deg/s
-    odom, events = Inbox(), Inbox()
-    user.subscribe(keys.base_odom(ROBOT), Odometry, odom)
-    user.subscribe(keys.events(ROBOT), Event, events)
-    try:
-        wait_until(lambda: svc.driver.connected and len(odom), 5, message="no odometry on the bus")
-        yield svc, user, odom, events, emulator
-    finally:
-        user.close()
-        svc.close()
-        svc_bus.close()
+from .conftest import ROBOT
 
 
 def refusals(events: Inbox) -> list[Event]:
@@ -58,8 +39,8 @@ def assert_still(odom: Inbox, emulator, n: int = 5) -> None:
     ({"vx": math.nan, "wz": 0.0}, "not finite"),
 ])
 def test_a_cmd_vel_beyond_the_limits_is_refused_with_an_event_and_nothing_moves(base, payload, says):
-    svc, user, odom, events, emu = base
-    user.put_raw(keys.base_cmd_vel(ROBOT), messages.pack(payload))
+    svc, user, odom, events, emu = base.svc, base.user, base.odom, base.events, base.emulator
+    user.put_raw(keys.base_cmd_vel(ROBOT), messages.pack({**payload, "controller": base.controller}))
     wait_until(lambda: refusals(events), 5, message="no bad_command event")
     event = refusals(events)[0]
     assert event.level == "error"
@@ -70,11 +51,11 @@ def test_a_cmd_vel_beyond_the_limits_is_refused_with_an_event_and_nothing_moves(
 
 
 def test_a_burst_of_300_bad_cmd_vel_gives_one_event_a_second_with_the_count(base):
-    svc, user, odom, events, emu = base
+    svc, user, odom, events, emu = base.svc, base.user, base.odom, base.events, base.emulator
     pub = user.publisher(keys.base_cmd_vel(ROBOT), Twist)
     t0 = time.monotonic()
     for i in range(300):
-        pub.put(Twist(vx=1.0 + i, wz=0.0))
+        pub.put(Twist(vx=1.0 + i, wz=0.0, controller=base.controller))
     sent_in = time.monotonic() - t0
 
     def accounted() -> int:
@@ -89,10 +70,10 @@ def test_a_burst_of_300_bad_cmd_vel_gives_one_event_a_second_with_the_count(base
 
 
 def test_a_different_mistake_is_reported_at_once(base):
-    svc, user, odom, events, emu = base
+    user, events = base.user, base.events
     pub = user.publisher(keys.base_cmd_vel(ROBOT), Twist)
     for _ in range(5):
-        pub.put(Twist(vx=3.0, wz=0.0))
+        pub.put(Twist(vx=3.0, wz=0.0, controller=base.controller))
     user.put_raw(keys.base_cmd_vel(ROBOT), messages.pack({"vx": "fast", "wz": 0.0}))
     wait_until(lambda: len(refusals(events)) >= 2, 0.9, message="the second kind of mistake was held back")
     assert "vx 3 m/s" in refusals(events)[0].text and "Twist.vx" in refusals(events)[1].text

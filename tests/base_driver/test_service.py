@@ -14,7 +14,7 @@ import time
 
 import pytest
 
-from asibot import keys
+from asibot import keys, ownership
 from asibot.bus import Bus
 from asibot.errors import RpcError
 from asibot.messages import Battery, Bumpers, EStop, Event, Odometry, Sonar, Twist
@@ -51,22 +51,24 @@ def world(memory_bus, emulator):
     svc_bus = Bus("base_driver")
     svc = BaseDriverService(svc_bus, ROBOT, emulator.url)
     user = Bus("test")
+    controller = ownership.announce(user, ROBOT, "base", "test")   # the test drives the base
     inbox = Inbox(user)
     wait_until(lambda: svc.driver.connected and inbox["odom"], 5, message="no odometry on the bus")
-    yield svc, user, inbox, emulator
+    wait_until(lambda: svc.holder.current == controller, 5)
+    yield svc, user, inbox, emulator, controller
     user.close()
     svc.close()
     svc_bus.close()
 
 
 def test_cmd_vel_on_the_bus_moves_the_emulated_pioneer(world):
-    svc, user, inbox, emu = world
+    svc, user, inbox, emu, controller = world
     pub = user.publisher(keys.base_cmd_vel(ROBOT), Twist)
     end = time.monotonic() + 1.0
     while time.monotonic() < end:
-        pub.put(Twist(vx=0.3, wz=0.0))
+        pub.put(Twist(vx=0.3, wz=0.0, controller=controller))
         time.sleep(0.05)
-    pub.put(Twist(vx=0.0, wz=0.0))
+    pub.put(Twist(vx=0.0, wz=0.0, controller=controller))
     wait_until(lambda: inbox["odom"][-1].vx == 0.0 and inbox["odom"][-1].x > 0.2, 3)
     assert inbox["odom"][-1].x == pytest.approx(0.3, abs=0.06)
     sonar = inbox["sonar"][-1]
@@ -78,7 +80,7 @@ def test_cmd_vel_on_the_bus_moves_the_emulated_pioneer(world):
 
 
 def test_bad_cmd_vel_is_rejected_and_moves_nothing(world):
-    svc, user, inbox, emu = world
+    svc, user, inbox, emu, controller = world
     from asibot.messages import pack
     user.put_raw(keys.base_cmd_vel(ROBOT), pack({"vx": "fast", "wz": 0.0}))
     user.put_raw(keys.base_cmd_vel(ROBOT), pack({"vx": float("nan"), "wz": 0.0}))
@@ -87,10 +89,10 @@ def test_bad_cmd_vel_is_rejected_and_moves_nothing(world):
 
 
 def test_latched_estop_stops_and_status_reports_it(world):
-    svc, user, inbox, emu = world
+    svc, user, inbox, emu, controller = world
     user.latch(keys.estop(ROBOT), EStop(engaged=True, reason="test button"))
     wait_until(lambda: "estop" in inbox.codes(), 3)
-    user.publisher(keys.base_cmd_vel(ROBOT), Twist).put(Twist(vx=0.3, wz=0.0))
+    user.publisher(keys.base_cmd_vel(ROBOT), Twist).put(Twist(vx=0.3, wz=0.0, controller=controller))
     time.sleep(0.3)
     assert emu.robot.target_vel == 0
     status = user.call(keys.driver_rpc(ROBOT, "status"), {}, timeout=2.0)
@@ -119,11 +121,11 @@ def test_late_driver_learns_a_latched_estop(memory_bus, emulator):
 
 
 def test_driver_alive_and_events_for_disconnect(world):
-    svc, user, inbox, emu = world
+    svc, user, inbox, emu, controller = world
     assert user.alive(keys.driver_alive(ROBOT))
     emu.pull_cable(0.5)
     wait_until(lambda: "disconnected" in inbox.codes(), 3)
-    wait_until(lambda: inbox.codes()[-1] == "connected", 5)
+    wait_until(lambda: inbox.codes()[-2:] == ["connected", "ready"], 5)
 
 
 @pytest.mark.slow
@@ -137,12 +139,14 @@ def test_standalone_processes_emulator_and_driver(router, tmp_path):
                             "--port", f"socket://127.0.0.1:{port}"], env=env)
     user = Bus("test")
     try:
+        controller = ownership.announce(user, ROBOT, "base", "test")
         inbox = Inbox(user)
         wait_until(lambda: inbox["odom"], 15, message="the driver process published no odometry")
+        wait_until(lambda: user.call(keys.driver_rpc(ROBOT, "status"))["controller"] == controller, 5)
         pub = user.publisher(keys.base_cmd_vel(ROBOT), Twist)
         end = time.monotonic() + 1.0
         while time.monotonic() < end:
-            pub.put(Twist(vx=0.2, wz=0.0))
+            pub.put(Twist(vx=0.2, wz=0.0, controller=controller))
             time.sleep(0.05)
         wait_until(lambda: inbox["odom"][-1].x > 0.1, 3)
 
@@ -156,7 +160,7 @@ def test_standalone_processes_emulator_and_driver(router, tmp_path):
         assert ctl("fly 3")["ok"] is False
         assert ctl("unplug 0.5")["ok"] is True
         wait_until(lambda: "disconnected" in inbox.codes(), 3)
-        wait_until(lambda: inbox.codes()[-1] == "connected", 6)
+        wait_until(lambda: inbox.codes()[-2:] == ["connected", "ready"], 6)
     finally:
         user.close()
         for p in (drv, emu):

@@ -227,3 +227,16 @@ def test_huge_requests_and_huge_refusals_stay_small(pair):
     with pytest.raises(RpcError) as err:
         a.call(key, {"point": [1.0] * 50_000}, timeout=5)  # under the limit, echoed by the handler
     assert calls and len(err.value.message) < 500
+
+
+def test_every_bus_of_a_memory_bus_block_joins_its_own_network():
+    """`testing.memory_bus(NAME)` isolates a test: a Bus() without an endpoint joins mem://NAME
+    (it joined mem://default, shared by every test, so a declaration one test left behind
+    answered in the next)."""
+    from asibot import testing
+    with testing.memory_bus("isolated-1"):
+        with Bus("a") as a:
+            assert a.endpoint == "mem://isolated-1"
+            a.announce(keys.driver_alive("r11"))
+            with testing.memory_bus("isolated-2"), Bus("b") as b:
+                assert b.endpoint == "mem://isolated-2" and b.alive(keys.ALL_DRIVERS) == []

@@ -93,7 +93,12 @@ def test_the_committed_recordings_decode_and_encode_to_their_own_bytes():
         for rec in iter_messages(path):
             body = m.decode_any(rec.payload)
             cls = m.REGISTRY[body[m.TYPE_FIELD]]
-            assert m.encode(m.decode(cls, rec.payload)) == rec.payload
+            again = m.encode(m.decode(cls, rec.payload))
+            if set(body) == {*cls._fields, m.TYPE_FIELD}:
+                assert again == rec.payload
+            else:   # recorded before a field was added (ArmCommand.controller): the recorded
+                    # fields come back as they were, the new ones with their defaults
+                assert {k: v for k, v in m.decode_any(again).items() if k in body} == body
 
 
 def test_a_large_decoded_array_is_read_only():

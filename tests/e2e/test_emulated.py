@@ -5,7 +5,7 @@ import time
 
 import pytest
 
-from asibot import keys
+from asibot import keys, ownership
 from asibot.client import CartesianClient
 from asibot.messages import ArmState, Odometry, Twist
 from asibot.testing import wait_until
@@ -29,7 +29,10 @@ def test_the_emulated_profile_drives_both_robots(up):
         assert arm.state()["joints"] == pytest.approx([10, 20, 30, 20, 0], abs=0.2)
     assert states and states[-1].positions[0] == pytest.approx(0.1745, abs=0.005)
 
-    # The base: ARCOS over TCP to the emulated P3-AT, cmd_vel in, odometry out.
+    # The base: ARCOS over TCP to the emulated P3-AT, cmd_vel in (from the controller that
+    # holds the base: this test, asibot.ownership), odometry out.
+    controller = ownership.announce(stack.bus, "pioneer", "base", "test")
+    wait_until(lambda: stack.bus.call(keys.driver_rpc("pioneer", "status"))["controller"] == controller, 10)
     odom: list[Odometry] = []
     stack.bus.subscribe(keys.base_odom("pioneer"), Odometry, odom.append)
     wait_until(lambda: odom, 10)
@@ -37,7 +40,7 @@ def test_the_emulated_profile_drives_both_robots(up):
     cmd = stack.bus.publisher(keys.base_cmd_vel("pioneer"), Twist)
     end = time.monotonic() + 2.0
     while time.monotonic() < end:
-        cmd.put(Twist(vx=0.3, wz=0.0))
+        cmd.put(Twist(vx=0.3, wz=0.0, controller=controller))
         time.sleep(0.05)
     # The driver's 200 ms watchdog stops the base once the commands end.
     wait_until(lambda: abs(odom[-1].vx) < 1e-3, 5)

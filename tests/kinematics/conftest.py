@@ -44,6 +44,7 @@ def build(robot: str, model=None) -> SimpleNamespace:
     server = KinematicsServer(bus, robot, model or asibot_model(), asibot_spec(), rate=100.0)
     server.cmd_pub = Sent(server.cmd_pub)
     wait_until(lambda: server.ctl.driver_alive and server.ctl.q is not None, timeout=5.0)
+    wait_until(lambda: driver.holder.current == server.controller, timeout=5.0)   # it obeys this server
     return SimpleNamespace(robot=robot, driver=driver, bus=bus, server=server, client=CartesianClient(robot))
 
 

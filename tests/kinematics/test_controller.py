@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from asibot.errors import RpcError
-from asibot.kinematics.controller import MOVJ, MOVV, NOT_CONTROLLING, Controller
+from asibot.kinematics.controller import MOVJ, MOVJV, MOVV, NOT_CONTROLLING, Controller
 from asibot.kinematics.pointer import PointerInput, pointer_velocity
 
 from .robot_under_test import asibot_model, asibot_spec
@@ -79,6 +79,38 @@ def test_movv_integrates_and_lapses_after_watchdog():
     ref = c.tick(0.25)   # no refresh for 250 ms
     assert c.state == NOT_CONTROLLING and c.outcome.code == "timeout"
     assert np.allclose(ref.velocities, 0)
+
+
+def test_movjv_moves_one_joint_stops_at_its_limit_and_lapses():
+    c = ready()
+    c.stream(np.radians([10.0, 0, 0, 0, 0]), 0.0, MOVJV)
+    assert c.state == MOVJV
+    c.tick(0.0)
+    ref = c.tick(0.1)
+    assert np.allclose(ref.positions, Q0 + np.radians([1.0, 0, 0, 0, 0]))
+    assert ref.velocities[0] == pytest.approx(math.radians(10.0))
+    # Far beyond the joint's speed: capped at its maximum, never jumps.
+    c.stream(np.radians([0, 0, 0, 0, 1000.0]), 0.15, MOVJV)
+    ref = c.tick(0.15)
+    assert abs(ref.velocities[4]) <= c.vmax[4] + 1e-12
+    # Towards a limit: the joint stops at it.
+    c.stream(np.radians([0, 25.0, 0, 0, 0]), 0.2, MOVJV)
+    t = 0.2
+    for _ in range(200):
+        t += 0.1
+        c.stream(np.radians([0, 25.0, 0, 0, 0]), t, MOVJV)
+        ref = c.tick(t)
+    assert ref.positions[1] == pytest.approx(c.upper[1])
+    ref = c.tick(t + 0.3)   # no refresh for 300 ms
+    assert c.state == NOT_CONTROLLING and c.outcome.code == "timeout"
+    assert np.allclose(ref.velocities, 0)
+
+
+def test_movjv_needs_one_velocity_per_joint():
+    c = ready()
+    with pytest.raises(RpcError) as err:
+        c.stream(np.zeros(3), 0.0, MOVJV)
+    assert err.value.code == "bad_request" and "5 finite" in err.value.message
 
 
 def test_pointer_input_validation_and_direction():

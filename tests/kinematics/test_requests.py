@@ -22,7 +22,7 @@ from asibot.testing import wait_until
 from .conftest import START, quiet
 
 #: Verbs that move the arm when accepted.
-MOTION = ("movj", "movl", "movv", "relj", "home", "pointer")
+MOTION = ("movj", "movl", "movv", "movjv", "relj", "home", "pointer")
 #: Longest sentence a refusal may carry (the bus cuts at 400 characters plus "...").
 MAX_REPLY_MESSAGE = 500
 #: The reply may take this long at most (act waits for the fingers), s.
@@ -61,6 +61,7 @@ def test_the_table_covers_every_cart_verb(server):
     ("movj", {"joints": [0, 0, 0, 0, 0], "speed": 1e-300}, "speed"),
     ("movj", {"joints": [0, 0, 0, 0, 0], "duration": 1e300}, "duration"),
     ("movv", {"velocity": [1e300, 0, 0, 0, 0]}, "velocity"),
+    ("movjv", {"velocity": [0, 0, 1e300, 0, 0]}, "velocity"),
     ("fwd", {"joints": [1e300, 0, 0, 0, 0]}, "joints"),
     ("relj", {"joints": [0, 0, 0, 0, 2**64 - 1]}, "joints"),
     ("wait", {"timeout": 1e300}, "timeout"),

@@ -119,6 +119,19 @@ def test_movv_moves_while_streamed_and_watchdog_stops(client):
     assert x1 > x0 + 0.01 and client.stat()[0] == pytest.approx(x1, abs=1e-3)
 
 
+def test_movjv_moves_one_joint_while_streamed_and_watchdog_stops(client):
+    client.movj(joints=[0, 30, 40, 30, 0], duration=0.5)
+    client.wait(timeout=5)
+    q0 = client.state()["joints"][0]
+    for _ in range(10):
+        client.movjv([10, 0, 0, 0, 0])
+        time.sleep(0.05)
+    assert client.state()["state"] == "movjv"
+    assert wait_until(lambda: client.state()["state"] == "not_controlling", timeout=5)
+    joints = client.state()["joints"]
+    assert joints[0] > q0 + 1.0 and joints[1:] == pytest.approx([30, 40, 30, 0], abs=0.1)
+
+
 def test_estop_refuses_motion_until_released(client):
     bus = Bus("test-estop")
     try:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from .sim_reach import move_to, solve_down
 
-from asibot.messages import ArmCommand
+from asibot.messages import COMMAND_WATCHDOG_S, ArmCommand
 from asibot.sim.arm import BadCommand, CommandRejected
 
 TOL = math.radians(0.5)
@@ -214,7 +214,7 @@ def test_reset_world_restores_everything(apartment):
 def test_losing_the_controller_stops_a_moving_arm(kitchen):
     kitchen.command_arm(ArmCommand(mode="position", values=[1.0, 0, 0, 0, 0]))
     kitchen.step(int(0.5 / kitchen.dt))
-    kitchen.controller_lost()
+    kitchen.set_controller("arm", None)
     q = kitchen.arm_state().positions[0]
     kitchen.step(int(1.0 / kitchen.dt))
     # it stops where its reference was (a servo lag of ~0.02 rad behind the reading), far from 1.0
@@ -229,5 +229,7 @@ def test_a_fault_is_reported_and_reset(kitchen):
         kitchen.command_arm(ArmCommand(mode="position", values=[0.1, 0, 0, 0, 0]))
     assert kitchen.arm_state().mode == "fault" and kitchen.arm_state().fault
     kitchen.reset_fault()
+    assert "ready" in [n.code for n in drain(kitchen)]
+    kitchen.step(int(COMMAND_WATCHDOG_S / kitchen.dt) + 1)   # a new request (asibot.arming)
     kitchen.command_arm(ArmCommand(mode="position", values=[0.1, 0, 0, 0, 0]))
     assert kitchen.arm_state().mode == "position"

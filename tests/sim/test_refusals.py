@@ -13,33 +13,10 @@ import pytest
 
 from asibot import keys
 from asibot import messages as m
-from asibot.bus import Bus
 from asibot.events import stands_for
-from asibot.sim.service import Options, SimService
-from asibot.sim.simulation import Simulation
 from asibot.testing import Inbox, wait_until
 
-ROBOT = "pioneer-sim"
-
-
-
-@pytest.fixture
-def sim(memory_bus):
-    svc_bus, user = Bus("sim"), Bus("test")
-    svc = SimService(svc_bus, Simulation(ROBOT, odom_noise=(0.0, 0.0)), Options(camera_hz=0.0))
-    arm, odom, events = Inbox(), Inbox(), Inbox()
-    user.subscribe(keys.arm_state(ROBOT), m.ArmState, arm)
-    user.subscribe(keys.base_odom(ROBOT), m.Odometry, odom)
-    user.subscribe(keys.events(ROBOT), m.Event, events)
-    try:
-        wait_until(lambda: len(arm) and len(odom), 10, message="the sim published no state")
-        # let the arm settle at home under gravity before measuring stillness
-        wait_until(lambda: max(map(abs, arm.last().velocities)) < 1e-3, 10)
-        yield svc, user, arm, odom, events
-    finally:
-        user.close()
-        svc.close()
-        svc_bus.close()
+from .conftest import ROBOT
 
 
 def refusals(events: Inbox) -> list[m.Event]:
@@ -82,7 +59,7 @@ def test_an_arm_command_beyond_the_limits_is_refused_with_an_event_and_nothing_m
         "feed_forward": ({"mode": "position", "values": here, "velocities": [0.0, 0.0, 0.0, 0.0, -1e300]},
                          f"joint {names[4]} velocity feed-forward -1e+300 rad/s is beyond its max speed"),
     }[case]
-    user.put_raw(keys.arm_command(ROBOT), m.pack(payload))
+    user.put_raw(keys.arm_command(ROBOT), m.pack({**payload, "controller": sim.arm_controller}))
     wait_until(lambda: refusals(events), 5, message="no bad_command event")
     event = refusals(events)[0]
     assert event.level == "error"
@@ -99,7 +76,7 @@ def test_an_arm_command_beyond_the_limits_is_refused_with_an_event_and_nothing_m
 def test_a_cmd_vel_beyond_the_p3at_is_refused_with_an_event_and_nothing_moves(sim, payload, says):
     svc, user, arm, odom, events = sim
     here = list(arm.last().positions)
-    user.put_raw(keys.base_cmd_vel(ROBOT), m.pack(payload))
+    user.put_raw(keys.base_cmd_vel(ROBOT), m.pack({**payload, "controller": sim.base_controller}))
     wait_until(lambda: refusals(events), 5, message="no bad_command event")
     event = refusals(events)[0]
     assert event.text.startswith("Base command refused, the base keeps its previous motion: ")
@@ -116,9 +93,9 @@ def test_a_burst_of_300_bad_commands_gives_one_event_a_second_per_reason(sim):
     t0 = time.monotonic()
     for i in range(300):        # every one different, as a fuzzer sends them; two reasons
         if i % 2:
-            cmd.put(m.ArmCommand(mode="position", values=[1e3 + i] + here[1:]))
+            cmd.put(m.ArmCommand(mode="position", values=[1e3 + i] + here[1:], controller=sim.arm_controller))
         else:
-            drive.put(m.Twist(vx=10.0 + i, wz=0.0))
+            drive.put(m.Twist(vx=10.0 + i, wz=0.0, controller=sim.base_controller))
     sent_in = time.monotonic() - t0
 
     def accounted() -> int:

@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from asibot import keys
+from asibot import keys, ownership
 from asibot import messages as m
 from asibot.bus import Bus
 from asibot.errors import RpcError
@@ -63,6 +63,9 @@ def test_the_sim_process_speaks_the_driver_contract(sim_process):
         bus.subscribe(keys.camera_depth(ROBOT, "front"), m.DepthImage, depth)
         bus.subscribe(keys.camera_info(ROBOT, "front"), m.CameraInfo, info)
         wait_until(lambda: arm.last() is not None and depth.last() is not None, timeout=10)
+        # The test holds the arm and the base (asibot.ownership).
+        arm_ctl, base_ctl = (ownership.announce(bus, ROBOT, part, "test") for part in ("arm", "base"))
+        wait_until(lambda: bus.call(keys.driver_rpc(ROBOT, "status"), {})["controller"] == arm_ctl, timeout=5)
         t1 = time.monotonic()
         time.sleep(1.0)
         assert len(arm.since(t1)) >= 50   # >= 50 Hz by contract; 100 Hz nominal
@@ -74,11 +77,13 @@ def test_the_sim_process_speaks_the_driver_contract(sim_process):
         # a position command is tracked
         goal = (np.array(status["upper"]) * 0 + np.array(arm.last().positions)).tolist()
         goal[0] += 0.2
-        bus.publisher(keys.arm_command(ROBOT), m.ArmCommand).put(m.ArmCommand(mode="position", values=goal))
+        bus.publisher(keys.arm_command(ROBOT), m.ArmCommand).put(m.ArmCommand(mode="position", values=goal,
+                                                                              controller=arm_ctl))
         wait_until(lambda: abs(arm.last().positions[0] - goal[0]) < 0.01, timeout=10)
 
         # a malformed command is refused with an error event and moves nothing
-        bus.put_raw(keys.arm_command(ROBOT), m.pack({"mode": "position", "values": [1.0, 2.0]}))
+        bus.put_raw(keys.arm_command(ROBOT), m.pack({"mode": "position", "values": [1.0, 2.0],
+                                                     "controller": arm_ctl}))
         wait_until(lambda: any(e.code == "bad_command" for e in events.since(0)), timeout=5)
 
         # a huge position is refused, not clipped: an event names the joint, the value and the
@@ -86,7 +91,8 @@ def test_the_sim_process_speaks_the_driver_contract(sim_process):
         wait_until(lambda: abs(arm.last().positions[0] - goal[0]) < 1e-3
                    and max(map(abs, arm.last().velocities)) < 1e-3, timeout=10)
         here = goal
-        bus.put_raw(keys.arm_command(ROBOT), m.pack({"mode": "position", "values": [1e300] * 5}))
+        bus.put_raw(keys.arm_command(ROBOT), m.pack({"mode": "position", "values": [1e300] * 5,
+                                                     "controller": arm_ctl}))
         wait_until(lambda: any("position 1e+300 rad is beyond its upper limit" in e.text
                                for e in events.since(0)), timeout=5)
         t2 = time.monotonic()
@@ -97,7 +103,7 @@ def test_the_sim_process_speaks_the_driver_contract(sim_process):
         # the base drives, then the latched estop stops it and it ignores further commands
         drive = bus.publisher(keys.base_cmd_vel(ROBOT), m.Twist)
         for _ in range(25):
-            drive.put(m.Twist(vx=0.3, wz=0.0))
+            drive.put(m.Twist(vx=0.3, wz=0.0, controller=base_ctl))
             time.sleep(0.02)
         wait_until(lambda: odom.last().x > 0.05, timeout=5)
         bus.latch(keys.estop(ROBOT), m.EStop(engaged=True, reason="test"))
@@ -105,7 +111,7 @@ def test_the_sim_process_speaks_the_driver_contract(sim_process):
         time.sleep(0.3)
         x_stopped = odom.last().x
         for _ in range(25):
-            drive.put(m.Twist(vx=0.3, wz=0.0))
+            drive.put(m.Twist(vx=0.3, wz=0.0, controller=base_ctl))
             time.sleep(0.02)
         time.sleep(0.3)
         assert odom.last().x == pytest.approx(x_stopped, abs=1e-3)

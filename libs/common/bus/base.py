@@ -164,7 +164,15 @@ class Bus(abc.ABC):
     # ------------------------------------------------------------ bookkeeping
     def _keep(self, obj: Any) -> Any:
         with self._lock:
-            self._closables.append(obj)
+            if not self._closed:
+                self._closables.append(obj)
+                return obj
+        # Declared while the bus closes (a callback racing close(), such as a latch kept from
+        # a subscription): undeclared at once, or it would outlive the bus.
+        try:
+            obj.close()
+        except Exception:
+            pass
         return obj
 
     def reject(self, key: str, error: Exception) -> None:
@@ -220,11 +228,13 @@ class Bus(abc.ABC):
     def put_raw(self, key: str, payload: bytes) -> None:
         self._put(key, payload)
 
-    def latch(self, key: str, msg: Any) -> None:
+    def latch(self, key: str, msg: Any, *, publish: bool = True) -> None:
         """Publish `msg` and keep answering `subscribe(..., latest=True)` with it.
 
         The value is served by a queryable of its own on `key` that returns the message
         bytes as they are (not an RPC reply), so a late joiner decodes it like any sample.
+        `publish=False` only keeps serving a value someone else published, so that it
+        outlives them (the drivers keep the estop state: asibot.estop).
         """
         payload = messages.encode(msg)
         with self._lock:
@@ -235,7 +245,8 @@ class Bus(abc.ABC):
                 with self._lock:
                     return key, self._latched[key]
             self._keep(self._declare_queryable(key, answer, workers=1))
-        self._put(key, payload)
+        if publish:
+            self._put(key, payload)
 
     def _newest_latched(self, key: str) -> list[tuple[str, bytes]]:
         """Current latched values on `key`: per concrete key, the one with the newest stamp

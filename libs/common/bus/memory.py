@@ -13,11 +13,16 @@ from __future__ import annotations
 import collections
 import functools
 import itertools
+import os
 import threading
 import time
 from typing import Any, Callable
 
 from asibot.bus.base import MEMORY_SCHEME, Answer, Bus, Drain, Prelude
+
+#: The environment variable of the default endpoint (asibot.bus.zenoh_backend.ROUTER_ENV,
+#: spelled here too so that this backend does not import zenoh).
+ROUTER_ENV = "ASIBOT_ROUTER"
 
 _networks: dict[str, "Network"] = {}
 _networks_lock = threading.Lock()
@@ -183,7 +188,10 @@ class MemoryBus(Bus):
 
     def __init__(self, name: str, endpoint: str | None = None, *, wait: float | None = None,
                  stop: threading.Event | None = None) -> None:
-        endpoint = endpoint or MEMORY_SCHEME + "default"
+        if endpoint is None:  # as the factory chose: $ASIBOT_ROUTER (testing.memory_bus sets it)
+            endpoint = os.environ.get(ROUTER_ENV, "")
+            if not endpoint.startswith(MEMORY_SCHEME):
+                endpoint = MEMORY_SCHEME + "default"
         if not endpoint.startswith(MEMORY_SCHEME) or not endpoint[len(MEMORY_SCHEME):]:
             raise ValueError(f"a memory bus endpoint looks like mem://NAME, not {endpoint!r}")
         super().__init__(name, endpoint)

@@ -1,0 +1,183 @@
+"""Web Task Creator benchmark: what a person waits for, in a real browser against the kitchen.
+
+Rows (each beside a reference measured in the same run):
+- `asibot up` to a usable page (the page loaded, its feed live, the arm listed), beside `asibot
+  up` to the kinematics service answering;
+- arm state from the driver to the page, p50/p99, beside the driver to a plain bus subscriber;
+- jog press (pointer down on a hold-to-move button) to the first arm command, p50/p99, beside a
+  Python program's movjv call to the first arm command;
+- page weight and load time, beside the npm packages' share.
+
+Times in the browser and in this process are both the machine's wall clock (the browser's
+`performance.timeOrigin + performance.now()`), so one-way delays need no round trip.
+
+    python bench/bench_web.py [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import tempfile
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "bench"))
+
+from table import print_table  # noqa: E402
+
+from asibot import keys  # noqa: E402
+from asibot.client import CartesianClient  # noqa: E402
+from asibot.messages import ArmCommand, ArmState  # noqa: E402
+from asibot.testing import Stack, wait_until  # noqa: E402
+
+ROBOT = "asibot-sim"
+CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+
+
+def pct(values: list[float], q: float) -> float:
+    return float(np.percentile(values, q)) if values else float("nan")
+
+
+def served(url: str) -> bool:
+    try:
+        return urllib.request.urlopen(url, timeout=1).status == 200
+    except OSError:
+        return False
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true", help="fewer samples")
+    n_jogs = 5 if ap.parse_args().quick else 20
+    from playwright.sync_api import sync_playwright
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp, sync_playwright() as p:
+        browser = p.chromium.launch(executable_path="/usr/bin/chromium", headless=True, args=CHROMIUM_ARGS)
+        t0 = time.monotonic()
+        stack = Stack(Path(tmp), "sim", ["web", "kinematics-asibot-sim"], ROOT / "compose.yaml")
+        os.environ["ASIBOT_ROUTER"] = stack.endpoint   # for this process's client
+        try:
+            # --- start-up ----------------------------------------------------------------------
+            client = CartesianClient(timeout=1.0)
+            wait_until(lambda: _answers(client), timeout=120, interval=0.1)
+            t_kinematics = time.monotonic() - t0
+            wait_until(lambda: served(stack.web_url), timeout=60, interval=0.05)
+            page = browser.new_page(viewport={"width": 1366, "height": 900})
+            sizes: dict[str, int] = {}
+            page.on("response", lambda r: sizes.__setitem__(r.url, len(r.body()) if r.ok else 0))
+            load_start = time.monotonic()
+            page.goto(stack.web_url + "#joint")
+            page.wait_for_selector("body[data-ready=true]")
+            page.wait_for_selector(".robot-card[data-robot=asibot-sim]")
+            t_page = time.monotonic() - t0
+            t_load = time.monotonic() - load_start
+            rows.append(("`asibot up` to a usable page", "s", t_page, "kinematics answering", t_kinematics, "10 s"))
+            page.wait_for_timeout(500)
+            total = sum(sizes.values())
+            vendor = sum(v for k, v in sizes.items() if "/static/vendor/" in k)
+            rows.append(("page weight", "KiB", total / 1024, "of which npm packages", vendor / 1024, ""))
+            rows.append(("page load to usable (cached server, fresh browser)", "s", t_load, "", "", ""))
+
+            # --- arm state to the page ---------------------------------------------------------
+            page.evaluate("""() => {
+                window.__seen = [];
+                const ws = new WebSocket(`ws://${location.host}/ws`);
+                ws.onmessage = (e) => { const m = JSON.parse(e.data);
+                  if (m.type === 'robot' && m.robot.id === 'asibot-sim' && m.robot.joints)
+                    window.__seen.push([performance.timeOrigin + performance.now(), m.robot.joints.deg]); };
+            }""")
+            published: list[tuple[float, list[float]]] = []
+            bus = stack.bus
+            sub = bus.subscribe(keys.arm_state(ROBOT), ArmState,
+                                lambda m: published.append((time.time() * 1000, [round(float(np.degrees(v)), 3) for v in m.positions])))
+            client.movj(joints=[40, 20, 30, 20, 30], duration=3.0)
+            client.wait(timeout=20)
+            client.movj(joints=[0, 10, 20, 10, 0], duration=3.0)
+            client.wait(timeout=20)
+            sub.close()
+            seen = page.evaluate("window.__seen")
+            first_seen: dict[tuple, float] = {}
+            for t, deg in seen:
+                first_seen.setdefault(tuple(deg), t)
+            to_page, to_bus = [], []
+            for t, deg in published:
+                if tuple(deg) in first_seen:
+                    to_page.append(first_seen[tuple(deg)] - t)
+            # The reference: the same states to a subscriber in this process (driver -> bus).
+            # The subscriber above stamped arrival; the driver's own send time is not on the wire,
+            # so measure the bus hop as half an RPC round trip to the sim.
+            for _ in range(50):
+                s = time.perf_counter()
+                bus.call(keys.driver_rpc(ROBOT, "object_pose"), {"name": "red_can"})
+                to_bus.append((time.perf_counter() - s) * 1000 / 2)
+            rows.append(("arm state, driver to page p50", "ms", pct(to_page, 50), "bus hop p50", pct(to_bus, 50), ""))
+            rows.append(("arm state, driver to page p99", "ms", pct(to_page, 99), "bus hop p99", pct(to_bus, 99), ""))
+            rows.append(("arm states shown in the page", "%", 100.0 * len(to_page) / max(1, len(published)),
+                         "push rate", "30 Hz", "20 Hz or more"))
+
+            # --- jog press to the first arm command -------------------------------------------
+            commands: list[float] = []
+            csub = bus.subscribe(keys.arm_command(ROBOT), ArmCommand, lambda m: commands.append(time.time() * 1000))
+            page.get_by_role("button", name="Hold to move").click()
+            page.evaluate("""() => { window.__press = [];
+                document.addEventListener('pointerdown', () => window.__press.push(performance.timeOrigin + performance.now()), true); }""")
+            jog = []
+            for i in range(n_jogs):
+                wait_until(lambda: _idle(client), timeout=10)
+                commands.clear()
+                name = "Joint 1 plus" if i % 2 == 0 else "Joint 1 minus"
+                box = page.get_by_role("button", name=name).bounding_box()
+                page.mouse.move(box["x"] + 20, box["y"] + 20)
+                page.mouse.down()
+                wait_until(lambda: commands, timeout=5)
+                page.wait_for_timeout(300)
+                page.mouse.up()
+                press = page.evaluate("window.__press")[-1]
+                jog.append(commands[0] - press)
+                page.wait_for_timeout(400)
+            reference = []
+            for i in range(n_jogs):
+                wait_until(lambda: _idle(client), timeout=10)
+                commands.clear()
+                s = time.time() * 1000
+                client.movjv([5 if i % 2 == 0 else -5, 0, 0, 0, 0])
+                wait_until(lambda: commands, timeout=5)
+                reference.append(commands[0] - s)
+                time.sleep(0.4)
+            csub.close()
+            rows.append(("jog press to first arm command p50", "ms", pct(jog, 50), "movjv from Python p50", pct(reference, 50), ""))
+            rows.append(("jog press to first arm command p99", "ms", pct(jog, 99), "movjv from Python p99", pct(reference, 99), ""))
+            client.close()
+        finally:
+            browser.close()
+            stack.stop()
+    print_table(rows, ("what", "unit", "value", "reference", "reference value", "budget"))
+    print(f"\n(samples: {len(to_page)} arm states, {len(jog)} jog presses; median of the page lag "
+          f"{statistics.median(to_page) if to_page else float('nan'):.1f} ms)")
+
+
+def _answers(client: CartesianClient) -> bool:
+    try:
+        if client.robot is None:
+            client.open(ROBOT)
+        client.stat()
+        return True
+    except Exception:
+        return False
+
+
+def _idle(client: CartesianClient) -> bool:
+    return client.state()["state"] == "not_controlling"
+
+
+if __name__ == "__main__":
+    main()

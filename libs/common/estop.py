@@ -1,0 +1,84 @@
+"""The latched estop outlives whoever engaged it: every process that obeys it keeps serving it.
+
+`asibot estop`, a program's `CartesianClient.estop()` or a web page latch
+`EStop(engaged=True)` on `rb/<robot>/estop`, and the first two exit soon after. A latch is
+served by the process that latched it, so when that process ended, a driver, controller or
+UI started later learned nothing, and took the robot for released. So every process that
+obeys the estop (the drivers, the sim, the kinematics service) follows it with `EStopState`,
+which keeps serving the newest state it received (`Bus.latch(..., publish=False)`): the
+state lives as long as any of them runs, and a subscriber with `latest=True` gets the
+newest of the copies (by stamp).
+
+A restarted driver learns the state from the controller, and a restarted controller from
+the driver. When all of them ended (the whole stack stopped), the state is gone with them:
+the stack starts released, which moves nothing by itself (a robot moves only on a new
+motion request). Hardware that must stay stopped across a restart of its software keeps a
+physical estop in its power circuit; this one is a software latch.
+
+`who()` names the person and program that engage or release it (`EStop.by`), so the drivers'
+events say who released a robot.
+"""
+
+from __future__ import annotations
+
+import getpass
+import logging
+import os
+import socket
+import sys
+import threading
+from typing import Any, Callable
+
+from asibot import keys
+from asibot.messages import EStop
+
+log = logging.getLogger(__name__)
+
+
+def who(program: str | None = None) -> str:
+    """"user@host (program, pid N)": who engages or releases an estop from this process."""
+    try:
+        user = getpass.getuser()
+    except Exception:  # no user name in some containers
+        user = f"uid {os.getuid()}" if hasattr(os, "getuid") else "someone"
+    program = program or os.path.basename(sys.argv[0] or "") or "python"
+    return f"{user}@{socket.gethostname()} ({program}, pid {os.getpid()})"
+
+
+def released_by(msg: EStop) -> str:
+    """" by NAME" when the release says who did it, else ""; for the drivers' sentences."""
+    return f" by {msg.by}" if msg.by else ""
+
+
+class EStopState:
+    """Follow the estop of `robot` on `bus`: `on_change(msg)` for every newer EStop (the
+    latched one first), and keep serving the newest, so it outlives its sender.
+
+    A state older than the one held (by stamp: two latches answered, or a sample that
+    overtook the latched answer) is ignored, and so is the same one twice (the latched
+    answer and the sample of one latch).
+    """
+
+    def __init__(self, bus: Any, robot: str, on_change: Callable[[EStop], None]) -> None:
+        self.key = keys.estop(robot)
+        self._bus = bus
+        self._on_change = on_change
+        self._lock = threading.Lock()
+        self.state: EStop | None = None
+        bus.subscribe(self.key, EStop, self._on_estop, latest=True)
+
+    @property
+    def engaged(self) -> bool:
+        state = self.state
+        return state is not None and state.engaged
+
+    def _on_estop(self, msg: EStop) -> None:
+        with self._lock:
+            if self.state is not None and (msg.stamp < self.state.stamp or msg == self.state):
+                return
+            self.state = msg
+        try:
+            self._bus.latch(self.key, msg, publish=False)
+        except Exception:  # a closing bus: the other keepers serve it
+            log.debug("could not keep the estop state of %s", self.key, exc_info=True)
+        self._on_change(msg)

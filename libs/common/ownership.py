@@ -1,0 +1,139 @@
+"""Ownership of motion: one controller at a time moves each part of a robot.
+
+Without it any process on the router could publish `arm/command` or `cmd_vel` and the
+driver obeyed (issue 10, finding 1): a replay, a fuzzer or a second kinematics service
+moved the arm while the user's `stop()` answered ok. The rule, kept by every driver (the
+CANopen arm driver, the ARCOS base driver, the sim):
+
+- A controller announces itself with a liveliness token whose key names it, an identity new
+  at every start (`new_id`), so a restarted controller is a new one. The arm and its gripper
+  are driven by the kinematics service, on `keys.controller_alive(robot, id)`
+  (`rb/<robot>/controller/alive/<id>`); a mobile base by the program that drives it (the nav
+  service, a teleop program, a test) on `keys.base_controller_alive(robot, id)`
+  (`rb/<robot>/base/controller/alive/<id>`). `announce` does both steps.
+- A part is held by the controller that came alive first among those alive, as its driver
+  saw them (by id for those it found alive at its own start). It holds the part until its
+  token vanishes (the process ended, crashed or lost the router); then the oldest of the
+  others alive takes over, if any.
+- Every command carries its sender's id (`ArmCommand.controller`, `GripperCommand.controller`,
+  `Twist.controller`). A driver obeys only the holder's: any other command (another
+  controller's, a replayed or anonymous one) is refused whole with an Event, rate-limited
+  like every refusal (`asibot.events.EventThrottle`), and moves nothing.
+- Stopping needs no ownership: the estop stops every part whoever engages it, and the
+  kinematics `stop` verb (`CartesianClient.stop()`) makes the holder command a hold,
+  whoever moved the arm. A change of holder, or its loss, stops the part and re-arms it
+  (`asibot.arming`): a stream still running from before does not move it.
+
+This is not access control (anyone on the router may announce a controller; keeping
+strangers off the router is the router's job): it makes one program at a time drive each
+part, and keeps strays from driving it by accident.
+"""
+
+from __future__ import annotations
+
+import secrets
+import threading
+from typing import Any, Callable
+
+from asibot import keys
+from asibot.events import CommandRefused
+
+#: The parts of a robot that have a holder: the arm with its gripper, and the mobile base.
+PARTS = ("arm", "base")
+
+
+def new_id(name: str) -> str:
+    """A controller's identity: `name` and a random suffix ("kinematics-3fa2b1c4"), a valid
+    key chunk, different at every start."""
+    return f"{name}-{secrets.token_hex(4)}"
+
+
+def token_key(robot: str, part: str, controller: str) -> str:
+    """The liveliness key on which `controller` announces itself for `part` of `robot`."""
+    if part == "arm":
+        return keys.controller_alive(robot, controller)
+    if part == "base":
+        return keys.base_controller_alive(robot, controller)
+    raise ValueError(f"part must be one of {', '.join(PARTS)}, not {part!r}")
+
+
+def pattern(robot: str, part: str) -> str:
+    """The pattern of every controller token of `part` of `robot`."""
+    token_key(robot, part, "x")  # says what a wrong part is
+    return keys.controllers_alive(robot) if part == "arm" else keys.base_controllers_alive(robot)
+
+
+def announce(bus: Any, robot: str, part: str = "arm", name: str = "controller") -> str:
+    """Announce a new controller of `part` of `robot` on `bus`; returns its id, which every
+    command it sends carries. It holds the part if no other controller does (see above)."""
+    controller = new_id(name)
+    bus.announce(token_key(robot, part, controller))
+    return controller
+
+
+class NotHolder(CommandRefused):
+    """A command from a sender that does not hold the part: refused whole, nothing moves."""
+
+    code = "not_holder"
+
+
+class Holder:
+    """Which controller holds `part` of `robot` now, from the liveliness of its controllers.
+
+    `update(key, alive)` is a `bus.watch` callback (`follow` wires it); `on_change(holder)`
+    is called, outside the lock, with the new holder or None when it changes.
+    """
+
+    def __init__(self, robot: str, part: str = "arm",
+                 on_change: Callable[[str | None], None] | None = None) -> None:
+        self.pattern = pattern(robot, part)
+        self.robot, self.part = robot, part
+        self._on_change = on_change
+        self._alive: list[str] = []          # ids in the order they came alive
+        self._lock = threading.Lock()
+
+    @property
+    def current(self) -> str | None:
+        with self._lock:
+            return self._alive[0] if self._alive else None
+
+    @property
+    def alive(self) -> list[str]:
+        """The controllers alive, in the order they hold the part (the holder first)."""
+        with self._lock:
+            return list(self._alive)
+
+    def follow(self, bus: Any) -> Any:
+        """Learn the controllers alive now, then follow them (ask before watching: a zenoh
+        liveliness query just after a liveliness subscriber may answer nothing)."""
+        for key in bus.alive(self.pattern):
+            self.update(key, True)
+        return bus.watch(self.pattern, self.update)
+
+    def update(self, key: str, alive: bool) -> None:
+        controller = keys.controller_of(key)
+        if controller is None:
+            return
+        with self._lock:
+            before = self._alive[0] if self._alive else None
+            if alive and controller not in self._alive:
+                self._alive.append(controller)
+            elif not alive and controller in self._alive:
+                self._alive.remove(controller)
+            after = self._alive[0] if self._alive else None
+        if after != before and self._on_change is not None:
+            self._on_change(after)
+
+    def refusal(self, controller: str) -> NotHolder | None:
+        """None when `controller` holds the part; otherwise the refusal, with its sentence."""
+        holder = self.current
+        if controller and controller == holder:
+            return None
+        what = f"the {self.part} of {self.robot}"
+        if holder is None:
+            holds = f"no controller holds {what} (none is alive)"
+        else:
+            holds = f"controller {holder!r} holds {what}"
+        sender = f"from controller {controller!r}" if controller else "without a controller identity"
+        return NotHolder("not_holder", f"it came {sender}, and {holds}; only the controller that holds "
+                                       "a robot moves it (see asibot.ownership)")

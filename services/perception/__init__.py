@@ -1,0 +1,1 @@
+"""Perception: depth images to laser scans, obstacle warnings, the red-object finder."""

@@ -1,0 +1,193 @@
+"""The robot half of the API: what the Connection Manager, the jog tabs and the 3D view call.
+
+Every action is one POST with a small JSON body, answered with JSON; the live state comes
+over the WebSocket (live.py). The request models are the API's description (FastAPI shows
+them at /docs), so the page never guesses a field or a unit.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Annotated, Literal
+
+import threading
+
+from fastapi import APIRouter, Path, Request
+from fastapi.responses import StreamingResponse
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt
+
+from asibot import robots
+from asibot.errors import RpcError
+from asibot.web.cameras import BOUNDARY, mjpeg
+from asibot.web.motion import SPEED_LEVELS
+
+router = APIRouter(prefix="/api")
+
+RobotId = Annotated[str, Path(pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.\-]{0,63}$",
+                              description="a robot id as the Connection Manager lists it")]
+Level = Annotated[StrictInt, Field(ge=1, le=len(SPEED_LEVELS), description="speed level, 1 (slowest) to 5")]
+Number = StrictFloat | StrictInt
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class Step(Strict):
+    """One jog step: a joint (0 for the first) or a point axis (0-4: x, y, z, rot(y'), rot(z''))."""
+    space: Literal["joint", "cartesian"]
+    axis: StrictInt
+    direction: Literal[-1, 1]
+    level: Level = 3
+    step: Annotated[Number, Field(gt=0, le=90)] | None = Field(
+        None, description="step size in m (x, y, z) or deg; default the seed's 5 deg / 0.10 m / 15 deg")
+
+
+class Move(Strict):
+    """The seed's movj/movl forms: absolute or relative, to a point or (movj) to joint values."""
+    kind: Literal["movj", "movl"]
+    values: Annotated[list[Number], Field(min_length=1, max_length=8)]
+    relative: StrictBool = False
+    joints: StrictBool = False
+    level: Level = 3
+
+
+class Target(Strict):
+    """A point [x, y, z, rot(y'), rot(z'')] (m, deg) whose joints the 3D view shows as a ghost."""
+    point: Annotated[list[Number], Field(min_length=5, max_length=5)]
+
+
+class Grip(Strict):
+    close: StrictBool
+
+
+class Speed(Strict):
+    level: Level = 3
+
+
+def _web(request: Request):
+    return request.app.state.web
+
+
+def _known(web, robot: str) -> str:
+    """The robot must be on the bus (a live driver or controller) for the page to command it."""
+    if robot not in web.fleet.ids():
+        live = ", ".join(web.fleet.ids()) or "none"
+        raise RpcError("unavailable", f"Robot {robot!r} is not connected (live robots: {live}). "
+                                      "Start it with `asibot up`, then choose it in the Connection Manager.")
+    return robot
+
+
+async def _run(fn, *args, **kwargs):
+    """Bus calls block for up to a few seconds: keep them off the event loop."""
+    return await asyncio.to_thread(fn, *args, **kwargs)
+
+
+@router.get("/robots", summary="every connected robot and its live state")
+def list_robots(request: Request) -> list[dict]:
+    return _web(request).fleet.views()
+
+
+@router.get("/robots/{robot}", summary="one robot's live state")
+def get_robot(robot: RobotId, request: Request) -> dict:
+    web = _web(request)
+    return web.fleet.view(_known(web, robot))
+
+
+@router.get("/robots/{robot}/model", summary="the robot's arm model for the 3D view")
+def get_model(robot: RobotId, request: Request) -> dict:
+    try:
+        spec = robots.get(robot)
+    except KeyError as exc:
+        raise RpcError("bad_request", exc.args[0][0].upper() + exc.args[0][1:] + ".") from None
+    return {"urdf": spec.urdf_path.read_text(), "joint_names": spec.joint_names,
+            "base_link": spec.base_link, "tool_link": spec.tool_link}
+
+
+@router.post("/robots/{robot}/step", summary="jog one step")
+async def step(robot: RobotId, body: Step, request: Request) -> dict:
+    web = _web(request)
+    _known(web, robot)
+    if body.space == "joint":
+        return await _run(web.motion.step_joint, robot, body.axis, body.direction, body.level, body.step)
+    return await _run(web.motion.step_axis, robot, body.axis, body.direction, body.level, body.step)
+
+
+@router.post("/robots/{robot}/move", summary="movj or movl, absolute or relative")
+async def move(robot: RobotId, body: Move, request: Request) -> dict:
+    web = _web(request)
+    _known(web, robot)
+    return await _run(web.motion.move, robot, body.kind, body.values, relative=body.relative,
+                      joints=body.joints, level=body.level)
+
+
+@router.post("/robots/{robot}/inv", summary="the joints that reach a point (nothing moves)")
+async def inverse(robot: RobotId, body: Target, request: Request) -> dict:
+    web = _web(request)
+    _known(web, robot)
+    joints = await _run(web.motion.inverse, robot, body.point)
+    return {"joints": joints, "names": robots.get(robot).joint_names}
+
+
+@router.post("/robots/{robot}/home", summary="go to the home position")
+async def home(robot: RobotId, body: Speed, request: Request) -> dict:
+    web = _web(request)
+    return await _run(web.motion.home, _known(web, robot), body.level)
+
+
+@router.post("/robots/{robot}/stop", summary="stop the arm's motion")
+async def stop(robot: RobotId, request: Request) -> dict:
+    web = _web(request)
+    return await _run(web.motion.stop, _known(web, robot))
+
+
+@router.post("/robots/{robot}/gripper", summary="open or close the gripper")
+async def gripper(robot: RobotId, body: Grip, request: Request) -> dict:
+    web = _web(request)
+    return await _run(web.motion.grip, _known(web, robot), body.close)
+
+
+@router.post("/robots/{robot}/estop", summary="engage this robot's emergency stop")
+async def estop_one(robot: RobotId, request: Request) -> dict:
+    web = _web(request)
+    await _run(web.motion.estop, robot)
+    await _run(web.runner.stop, "stopped by the emergency stop")
+    return {"engaged": True}
+
+
+@router.post("/estop", summary="emergency stop of every connected robot and the running program")
+async def estop_all(request: Request) -> dict:
+    web = _web(request)
+    stopped = web.fleet.ids()
+    for robot in stopped:
+        await _run(web.motion.estop, robot)
+    await _run(web.runner.stop, "stopped by the emergency stop")
+    return {"robots": stopped}
+
+
+@router.post("/robots/{robot}/release", summary="release the emergency stop")
+async def release(robot: RobotId, request: Request) -> dict:
+    web = _web(request)
+    await _run(web.motion.release, _known(web, robot))
+    return {"engaged": False}
+
+
+@router.post("/robots/{robot}/reset_fault", summary="ask the driver to clear a fault")
+async def reset_fault(robot: RobotId, request: Request) -> dict:
+    web = _web(request)
+    return await _run(web.motion.reset_fault, _known(web, robot))
+
+
+@router.get("/robots/{robot}/cameras", summary="the robot's cameras that are sending images")
+def cameras(robot: RobotId, request: Request) -> dict:
+    return {"cameras": _web(request).cameras.names(robot)}
+
+
+@router.get("/robots/{robot}/cameras/{name}.mjpg", summary="a camera's images as an MJPEG stream")
+def camera_stream(robot: RobotId, name: str, request: Request) -> StreamingResponse:
+    try:
+        frames = _web(request).cameras.frames(robot, name, threading.Event())
+    except KeyError as exc:
+        raise RpcError("unavailable", exc.args[0]) from None
+    return StreamingResponse(mjpeg(frames), media_type=f"multipart/x-mixed-replace; boundary={BOUNDARY}",
+                             headers={"Cache-Control": "no-store"})

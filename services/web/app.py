@@ -1,0 +1,163 @@
+"""The web Task Creator's FastAPI application: the page, its JSON API and its WebSocket.
+
+`create_app(web)` takes everything the routes use (`Web`: the bus-facing parts and the user's
+files), so tests build it on the in-memory bus and a temporary folder, and the service builds
+it on the real router. The page is static files (static/): index.html, our ES modules in
+static/js/ as written, and the npm packages bundled once into static/vendor/ by bootstrap.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from fastapi import FastAPI, WebSocket, WebSocketDisconnect
+from fastapi.responses import FileResponse, JSONResponse
+from fastapi.staticfiles import StaticFiles
+
+from asibot.errors import RpcError
+from asibot.web import errors
+from asibot.web.api_files import ICON_LIMIT, IMPORT_LIMIT
+from asibot.web.api_files import router as files_router
+from asibot.web.api_robots import router as robots_router
+from asibot.web.cameras import Cameras
+from asibot.web.fleet import Fleet
+from asibot.web.live import Live
+from asibot.web.motion import Motion
+from asibot.web.runner import ProgramRunner
+from asibot.web.userdata import UserData
+
+STATIC = Path(__file__).resolve().parent / "static"
+#: Largest request body, bytes; uploads have their own, larger limits.
+BODY_LIMIT = 1024 * 1024
+UPLOAD_PATHS = {"/api/icons": ICON_LIMIT + 64 * 1024, "/api/import": IMPORT_LIMIT + 64 * 1024}
+
+log = logging.getLogger("asibot.web")
+
+
+@dataclass
+class Web:
+    """What the routes work with."""
+
+    fleet: Fleet
+    motion: Motion
+    data: UserData
+    runner: ProgramRunner
+    live: Live
+    cameras: Cameras
+
+
+class BodyLimit:
+    """Refuse a request body over its limit with 413 and a sentence, before it is read whole
+    (Content-Length first; a chunked body is counted as it arrives)."""
+
+    def __init__(self, app: Any) -> None:
+        self.app = app
+
+    async def __call__(self, scope: dict, receive: Any, send: Any) -> None:
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        limit = UPLOAD_PATHS.get(scope["path"], BODY_LIMIT)
+        too_big = JSONResponse({"error": "bad_request",
+                                "message": f"The request is larger than {limit // 1024} KiB; nothing was changed."},
+                               status_code=413)
+        length = dict(scope.get("headers") or []).get(b"content-length")
+        if length is not None and length.isdigit() and int(length) > limit:
+            return await too_big(scope, receive, send)
+        seen = 0
+
+        async def counted() -> dict:
+            nonlocal seen
+            message = await receive()
+            seen += len(message.get("body", b""))
+            if seen > limit:
+                raise _TooBig()
+            return message
+
+        try:
+            await self.app(scope, counted, send)
+        except _TooBig:
+            await too_big(scope, receive, send)
+
+
+class _TooBig(Exception):
+    pass
+
+
+def create_app(web: Web) -> FastAPI:
+    @contextlib.asynccontextmanager
+    async def lifespan(app: FastAPI):
+        pusher = asyncio.create_task(web.live.pusher())
+        try:
+            yield
+        finally:
+            pusher.cancel()
+
+    app = FastAPI(title="ASIBOT Task Creator", lifespan=lifespan)
+    app.state.web = web
+    errors.install(app)
+    app.include_router(robots_router)
+    app.include_router(files_router)
+
+    @app.get("/api/config", summary="what the page needs to draw its controls")
+    def config() -> dict:
+        return {"jog": web.motion.settings.as_json()}
+
+    @app.websocket("/ws")
+    async def feed(socket: WebSocket) -> None:
+        await socket.accept()
+        page = await web.live.attach(socket)
+        sender = asyncio.create_task(web.live.drain(page))
+        try:
+            while True:
+                await _on_page_message(web, page, await socket.receive_text())
+        except WebSocketDisconnect:
+            pass
+        finally:
+            web.live.detach(page)
+            sender.cancel()
+            if page.holding:  # a closed tab must not leave a hold-to-move running
+                await asyncio.to_thread(_stop_quietly, web, page.holding)
+
+    @app.get("/", include_in_schema=False)
+    def index() -> FileResponse:
+        return FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-cache"})
+
+    app.mount("/static", StaticFiles(directory=STATIC), name="static")
+    return BodyLimit(app)  # type: ignore[return-value]
+
+
+def _stop_quietly(web: Web, robot: str) -> None:
+    try:
+        web.motion.stop(robot)
+    except RpcError as exc:
+        log.info("stop of %s after a hold: %s", robot, exc)
+
+
+async def _on_page_message(web: Web, page, text: str) -> None:
+    """Hold-to-move over the socket: `hold` beats while a button is held, `release` on let go."""
+    try:
+        msg = json.loads(text)
+        kind = msg["type"]
+    except (ValueError, KeyError, TypeError):
+        await page.socket.send_text(json.dumps({"type": "refused", "text": "The page sent a message the server does not understand."}))
+        return
+    if kind == "hold":
+        robot = msg.get("robot")
+        try:
+            if robot not in web.fleet.ids():
+                raise RpcError("unavailable", f"Robot {robot!r} is not connected.")
+            page.holding = robot
+            await asyncio.to_thread(web.motion.hold, robot, msg.get("space"), msg.get("axis"),
+                                    msg.get("direction"), msg.get("level"))
+        except RpcError as exc:
+            page.offer(json.dumps({"type": "refused", "code": exc.code, "text": exc.message}))
+    elif kind == "release":
+        robot, page.holding = page.holding, None
+        if robot:
+            await asyncio.to_thread(_stop_quietly, web, robot)

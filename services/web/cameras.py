@@ -1,0 +1,71 @@
+"""Camera images for the Video tab, as MJPEG streams an <img> can show with no script.
+
+The cameras publish JPEG frames on the bus already; the server keeps the newest frame of each
+(undecoded, so an unwatched camera costs one copy per frame) and forwards frames to the pages
+that watch. Which cameras exist is learnt from their frames: a camera is listed while it sends.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Iterator
+
+from asibot import keys, messages
+from asibot.errors import MessageError
+from asibot.bus import Bus
+from asibot.messages import RgbImage
+
+BOUNDARY = "frame"
+#: A camera silent this long is no longer listed, and its watchers' streams end, s.
+SILENT_S = 5.0
+
+
+class Cameras:
+    """The newest frame of every camera on the bus, by (robot, camera name)."""
+
+    def __init__(self, bus: Bus) -> None:
+        self._cond = threading.Condition()
+        self._frames: dict[tuple[str, str], tuple[int, float, bytes]] = {}   # seq, time, payload
+        bus.subscribe_raw(keys.every_robot(keys.camera_rgb, "*"), self._on_frame, ring=True, maxsize=4)
+
+    def _on_frame(self, key: str, payload: bytes, stamp_ns: int) -> None:
+        robot, name = keys.robot_of(key), keys.camera_of(key)
+        if robot and name:
+            with self._cond:
+                seq = self._frames.get((robot, name), (0, 0.0, b""))[0] + 1
+                self._frames[(robot, name)] = (seq, time.monotonic(), payload)
+                self._cond.notify_all()
+
+    def names(self, robot: str) -> list[str]:
+        """Cameras of `robot` that sent a frame in the last SILENT_S seconds."""
+        now = time.monotonic()
+        with self._cond:
+            return sorted(n for (r, n), (_, t, _) in self._frames.items() if r == robot and now - t < SILENT_S)
+
+    def frames(self, robot: str, name: str, stop: threading.Event) -> Iterator[bytes]:
+        """JPEG frames of one camera as they come, until `stop` or SILENT_S of silence."""
+        if name not in self.names(robot):
+            raise KeyError(f"{robot} has no camera {name!r} sending images; it has: "
+                           f"{', '.join(self.names(robot)) or 'none'}")
+        return self._stream(robot, name, stop)
+
+    def _stream(self, robot: str, name: str, stop: threading.Event) -> Iterator[bytes]:
+        seen = 0
+        while not stop.is_set():
+            with self._cond:
+                fresh = self._cond.wait_for(
+                    lambda: stop.is_set() or self._frames[(robot, name)][0] != seen, timeout=SILENT_S)
+                if not fresh or stop.is_set():
+                    return
+                seen, _, payload = self._frames[(robot, name)]
+            try:
+                yield messages.decode(RgbImage, payload).jpeg
+            except MessageError:
+                continue
+
+
+def mjpeg(frames: Iterator[bytes]) -> Iterator[bytes]:
+    """multipart/x-mixed-replace parts, one per JPEG frame."""
+    for jpeg in frames:
+        yield (f"--{BOUNDARY}\r\nContent-Type: image/jpeg\r\nContent-Length: {len(jpeg)}\r\n\r\n").encode() + jpeg + b"\r\n"

@@ -1,0 +1,154 @@
+"""What the page shows about every robot on the bus, kept up to date from its messages.
+
+The web server never asks a robot for its state: it listens, like any other service, to the
+drivers' and controllers' liveliness, the arm, gripper and Cartesian states, the latched
+estop and the events, and keeps the newest of each per robot. The page gets a JSON view of
+that (`Fleet.view`), in the user's units (m and deg), pushed over its WebSocket.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from asibot import keys, robots
+from asibot.bus import Bus
+from asibot.messages import ArmState, CartState, EStop, Event, GripperState, Odometry
+from asibot.poses import user_point
+
+#: Events kept per robot for the page (newest last).
+EVENTS_KEPT = 20
+
+
+@dataclass
+class RobotView:
+    """The newest known state of one robot; None where nothing has come yet."""
+
+    robot_id: str
+    driver: bool = False
+    controller: bool = False
+    arm: ArmState | None = None
+    cart: CartState | None = None
+    gripper: GripperState | None = None
+    odom: Odometry | None = None
+    estop: EStop | None = None
+    events: collections.deque = field(default_factory=lambda: collections.deque(maxlen=EVENTS_KEPT))
+
+    def point(self) -> list[float] | None:
+        """The arm's current point [x, y, z, rot(y'), rot(z'')] in m and deg."""
+        return None if self.cart is None else [round(v, 6) for v in user_point(self.cart.pose)]
+
+    def as_json(self) -> dict[str, Any]:
+        try:
+            spec = robots.get(self.robot_id)
+        except KeyError:
+            spec = None
+        arm = self.arm
+        return {
+            "id": self.robot_id,
+            "simulated": self.robot_id.endswith("-sim"),
+            "arm": spec.arm if spec else None,
+            "has_base": bool(spec and spec.has_base),
+            "driver": self.driver,
+            "controller": self.controller,
+            "estop": {"engaged": bool(self.estop and self.estop.engaged),
+                      "reason": self.estop.reason if self.estop else ""},
+            "fault": arm.fault if arm else "",
+            "mode": arm.mode if arm else "",
+            "state": self.cart.state if self.cart else "",
+            "joints": None if arm is None else {
+                "names": list(arm.names), "deg": [round(math.degrees(v), 3) for v in arm.positions]},
+            "point": self.point(),
+            "gripper": None if self.gripper is None else {
+                "opening": round(self.gripper.opening, 4), "holding": self.gripper.holding},
+            "base": None if self.odom is None else {
+                "x": round(self.odom.x, 3), "y": round(self.odom.y, 3),
+                "theta_deg": round(math.degrees(self.odom.theta), 1)},
+            "events": list(self.events),
+        }
+
+
+class Fleet:
+    """Every robot seen on the bus. `on_change(robot_id)` is called from bus threads whenever
+    something about a robot changed; the caller decides how often to push it to the page."""
+
+    def __init__(self, bus: Bus, on_change: Callable[[str], None] = lambda robot_id: None,
+                 clock: Callable[[], float] = time.time) -> None:
+        self.bus = bus
+        self.on_change = on_change
+        self.clock = clock
+        self._lock = threading.Lock()
+        self._robots: dict[str, RobotView] = {}
+        for pattern, what in ((keys.ALL_DRIVERS, "driver"), (keys.ALL_CONTROLLERS, "controller")):
+            for key in bus.alive(pattern):  # before watch(): see the bus's liveliness notes
+                self._alive(what, key, True)
+            bus.watch(pattern, lambda key, alive, what=what: self._alive(what, key, alive))
+        self._follow(keys.arm_state, ArmState, "arm")
+        self._follow(keys.cart_state, CartState, "cart")
+        self._follow(keys.gripper_state, GripperState, "gripper")
+        self._follow(keys.base_odom, Odometry, "odom")
+        bus.subscribe(keys.every_robot(keys.estop), EStop, self._on("estop"), with_key=True, latest=True)
+        bus.subscribe(keys.every_robot(keys.events), Event, self._on_event, with_key=True, maxsize=200)
+
+    def _follow(self, key_of_robot: Callable[[str], str], msg_type: type, attr: str) -> None:
+        # A ring of one: the page needs the newest state, never a backlog of old ones.
+        self.bus.subscribe(keys.every_robot(key_of_robot), msg_type, self._on(attr),
+                           with_key=True, ring=True, maxsize=1)
+
+    def _view(self, robot_id: str) -> RobotView:
+        view = self._robots.get(robot_id)
+        if view is None:
+            view = self._robots[robot_id] = RobotView(robot_id)
+        return view
+
+    def _alive(self, what: str, key: str, alive: bool) -> None:
+        robot_id = keys.robot_of(key)
+        if robot_id is None:
+            return
+        with self._lock:
+            setattr(self._view(robot_id), what, alive)
+        self.on_change(robot_id)
+
+    def _on(self, attr: str) -> Callable[[str, Any], None]:
+        def store(key: str, msg: Any) -> None:
+            robot_id = keys.robot_of(key)
+            if robot_id is None:
+                return
+            with self._lock:
+                setattr(self._view(robot_id), attr, msg)
+            self.on_change(robot_id)
+        return store
+
+    def _on_event(self, key: str, event: Event) -> None:
+        robot_id = keys.robot_of(key)
+        if robot_id is None:
+            return
+        with self._lock:
+            self._view(robot_id).events.append(
+                {"time": self.clock(), "level": event.level, "code": event.code, "text": event.text})
+        self.on_change(robot_id)
+
+    # --- what the server asks -------------------------------------------------------------
+    def ids(self) -> list[str]:
+        """Robots with a live driver or controller, sorted: the ones the page can command."""
+        with self._lock:
+            return sorted(r for r, v in self._robots.items() if v.driver or v.controller)
+
+    def view(self, robot_id: str) -> dict[str, Any]:
+        """The page's view of one robot; KeyError when it was never seen."""
+        with self._lock:
+            return self._robots[robot_id].as_json()
+
+    def views(self) -> list[dict[str, Any]]:
+        with self._lock:
+            return [v.as_json() for r, v in sorted(self._robots.items()) if v.driver or v.controller]
+
+    def point(self, robot_id: str) -> list[float] | None:
+        """The robot's current point in m and deg, or None before its first Cartesian state."""
+        with self._lock:
+            view = self._robots.get(robot_id)
+            return None if view is None else view.point()

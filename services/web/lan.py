@@ -1,0 +1,125 @@
+"""Serving phones and tablets on the LAN: HTTPS with a self-signed certificate and a token.
+
+By default the page is served on 127.0.0.1 only. `--lan` serves it to the local network, which
+needs two things the loopback page does not: HTTPS (browsers give the gamepad, the motion
+sensors and the microphone only to secure pages) and a secret, because anyone on the network
+could otherwise move the robot. The certificate is made on first use and kept in the data
+folder; so is the token, which is printed once, when it is made (a new one: --new-token).
+A browser presents the token once (`/?token=...`, the address printed or shown as a QR code)
+and keeps it in a cookie.
+"""
+
+from __future__ import annotations
+
+import datetime
+import hmac
+import ipaddress
+import os
+import secrets
+import socket
+from pathlib import Path
+from typing import Any
+
+from asibot.web.userdata import write_atomic
+
+COOKIE = "asibot_token"
+#: Paths a browser may load before it has the token (the page tells it how to get one).
+OPEN_PATHS = ("/static/", "/favicon")
+
+
+def lan_addresses() -> list[str]:
+    """This machine's IPv4 addresses other than loopback (for the address to print)."""
+    found: set[str] = set()
+    try:
+        for info in socket.getaddrinfo(socket.gethostname(), None, socket.AF_INET):
+            found.add(info[4][0])
+    except OSError:
+        pass
+    return sorted(a for a in found if not a.startswith("127."))
+
+
+def ensure_certificate(folder: Path, names: list[str]) -> tuple[Path, Path]:
+    """The self-signed certificate and key in `folder`, made on first use (valid 825 days,
+    the longest browsers accept) for this host's names and addresses."""
+    cert, key = folder / "cert.pem", folder / "key.pem"
+    if cert.exists() and key.exists():
+        return cert, key
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.hazmat.primitives.asymmetric import ec
+    from cryptography.x509.oid import NameOID
+
+    folder.mkdir(parents=True, exist_ok=True)
+    private = ec.generate_private_key(ec.SECP256R1())
+    subject = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "ASIBOT Task Creator")])
+    alt: list[Any] = [x509.DNSName("localhost"), x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]
+    for name in names:
+        try:
+            alt.append(x509.IPAddress(ipaddress.ip_address(name)))
+        except ValueError:
+            alt.append(x509.DNSName(name))
+    now = datetime.datetime.now(datetime.timezone.utc)
+    certificate = (x509.CertificateBuilder().subject_name(subject).issuer_name(subject)
+                   .public_key(private.public_key()).serial_number(x509.random_serial_number())
+                   .not_valid_before(now - datetime.timedelta(minutes=5))
+                   .not_valid_after(now + datetime.timedelta(days=825))
+                   .add_extension(x509.SubjectAlternativeName(alt), critical=False)
+                   .sign(private, hashes.SHA256()))
+    write_atomic(key, private.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
+                                            serialization.NoEncryption()))
+    os.chmod(key, 0o600)
+    write_atomic(cert, certificate.public_bytes(serialization.Encoding.PEM))
+    return cert, key
+
+
+def ensure_token(folder: Path, renew: bool = False) -> tuple[str, bool]:
+    """The LAN token and whether it was just made (then, and only then, it is printed)."""
+    path = folder / "token"
+    if path.exists() and not renew:
+        return path.read_text().strip(), False
+    folder.mkdir(parents=True, exist_ok=True)
+    token = secrets.token_urlsafe(18)
+    write_atomic(path, token.encode())
+    os.chmod(path, 0o600)
+    return token, True
+
+
+class TokenGate:
+    """ASGI middleware: every request and WebSocket needs the token (cookie, or
+    `Authorization: Bearer`); `/?token=...` stores it in a cookie and goes to the page."""
+
+    def __init__(self, app: Any, token: str) -> None:
+        self.app = app
+        self.token = token.encode()
+
+    def _ok(self, headers: dict[bytes, bytes]) -> bool:
+        auth = headers.get(b"authorization", b"")
+        if auth.startswith(b"Bearer ") and hmac.compare_digest(auth[7:].strip(), self.token):
+            return True
+        for part in headers.get(b"cookie", b"").split(b";"):
+            name, _, value = part.strip().partition(b"=")
+            if name == COOKIE.encode() and hmac.compare_digest(value, self.token):
+                return True
+        return False
+
+    async def __call__(self, scope: dict, receive: Any, send: Any) -> None:
+        if scope["type"] not in ("http", "websocket"):
+            return await self.app(scope, receive, send)
+        headers = dict(scope.get("headers") or [])
+        path = scope.get("path", "")
+        if self._ok(headers) or path.startswith(OPEN_PATHS):
+            return await self.app(scope, receive, send)
+        query = scope.get("query_string", b"").decode("latin-1")
+        given = dict(p.partition("=")[::2] for p in query.split("&") if p).get("token", "")
+        if scope["type"] == "http" and path == "/" and hmac.compare_digest(given.encode(), self.token):
+            await send({"type": "http.response.start", "status": 303, "headers": [
+                (b"location", b"/"),
+                (b"set-cookie", f"{COOKIE}={given}; Path=/; Max-Age=31536000; Secure; HttpOnly; SameSite=Strict".encode())]})
+            return await send({"type": "http.response.body", "body": b""})
+        if scope["type"] == "websocket":
+            return await send({"type": "websocket.close", "code": 1008})
+        body = (b"This robot's page needs its access token. Open the address that `asibot up` printed "
+                b"(it ends with ?token=...), or the QR code on the Home page of a computer that has it.")
+        await send({"type": "http.response.start", "status": 401,
+                    "headers": [(b"content-type", b"text/plain; charset=utf-8")]})
+        await send({"type": "http.response.body", "body": body})

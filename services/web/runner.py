@@ -1,0 +1,332 @@
+"""Runs a user's Python program (from the Program tab) in its own process, with limits.
+
+A user's program is untrusted in the everyday sense: it may loop forever, allocate without
+bound, crash, or leave child processes behind. So it never runs inside the web server: it gets
+its own process in its own session (Stop kills the whole process group), CPU and memory limits
+set in the child before `exec`, no shell, no stdin. Its output comes back line by line, capped,
+and whenever it ends for any reason but a clean exit the arm is told to stop (`stop_robot`),
+because a program that dies mid-motion must not leave the arm moving. The page gets a sentence
+saying why it ended.
+
+Plain Python on purpose: the server wires the callbacks to its WebSocket and to the bus.
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import logging
+import os
+import re
+import resource
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Any, Callable
+
+log = logging.getLogger(__name__)
+
+#: stderr lines kept to explain the end (a traceback's last frames and message fit easily).
+STDERR_TAIL = 200
+#: How long Stop waits for SIGTERM to work before SIGKILL, s.
+TERM_GRACE = 1.0
+#: Marks a line cut at max_line_chars.
+CUT_MARK = " [line cut]"
+#: Text in the stderr tail that says the program ran out of memory (Python, C++, OpenBLAS...).
+_MEMORY_MARKERS = ("MemoryError", "std::bad_alloc", "Cannot allocate memory", "Memory allocation")
+_FRAME = re.compile(r'^\s*File "(?P<file>.+)", line (?P<line>\d+)')
+
+
+@dataclass
+class Limits:
+    """What one program may use; hitting a limit ends it with a sentence that says which."""
+
+    cpu_seconds: int = 120
+    # RLIMIT_DATA, not RLIMIT_AS. Measured on this stack: `import numpy, zenoh, asibot.client`
+    # plus an open Zenoh session has ~100 MB of data (VmData) but ~370-520 MB of address space
+    # on a 2-core machine, most of it glibc's 64 MiB malloc arena reservations per thread
+    # (MALLOC_ARENA_MAX=1 takes it to 170 MB), so address space grows with the thread and core
+    # count, not with what the program uses. When Zenoh cannot create its threads it hangs
+    # instead of failing (seen with RLIMIT_AS up to 384 MiB and RLIMIT_DATA up to 160 MiB), so a
+    # limit that is tight on a bigger machine would hang programs at start. RLIMIT_DATA (Linux
+    # >= 4.7: heap plus private writable mappings, i.e. memory the program can actually fill)
+    # counts what a program allocates, and 1 GiB leaves ~900 MiB for the program itself.
+    memory_bytes: int = 1 << 30
+    max_output_lines: int = 2000
+    max_line_chars: int = 2000
+
+
+@dataclass
+class RunResult:
+    """How one run ended, for the page: `reason` is a sentence for the user."""
+
+    program: str
+    robot: str
+    started: float  # time.time()
+    ended: float
+    exit_code: int | None  # negative: killed by that signal (subprocess' convention)
+    reason: str
+    ok: bool
+
+
+class ProgramRunner:
+    """Runs one user program at a time in a child process with limits (see the module doc).
+
+    Callbacks run on the runner's threads: `on_output(stream, line)` with stream "out" or
+    "err" (calls are serialised), `stop_robot(robot)` when a run ends in anything but a clean
+    exit, then `on_exit(result)`. Their exceptions are logged and otherwise ignored.
+    """
+
+    def __init__(self, python: str = sys.executable, limits: Limits | None = None,
+                 env: dict[str, str] | None = None,
+                 on_output: Callable[[str, str], None] | None = None,
+                 on_exit: Callable[[RunResult], None] | None = None,
+                 stop_robot: Callable[[str], None] | None = None) -> None:
+        self.python = python
+        self.limits = limits or Limits()
+        self.env = dict(env or {})
+        self.on_output = on_output
+        self.on_exit = on_exit
+        self.stop_robot = stop_robot
+        self._lock = threading.Lock()         # guards the run's state below
+        self._signal_lock = threading.Lock()  # signals vs reaping: never signal a reaped pgid
+        self._output_lock = threading.Lock()  # one on_output at a time, ring in call order
+        self._ring: collections.deque[tuple[str, str]] = collections.deque(maxlen=self.limits.max_output_lines)
+        self._proc: subprocess.Popen[bytes] | None = None
+        self._waiter: threading.Thread | None = None
+        self._reaped = threading.Event()
+        self._done = threading.Event()
+        self._done.set()
+        self._program = ""
+        self._robot = ""
+        self._started = 0.0
+        self._stop_reason: str | None = None
+        self._last: RunResult | None = None
+
+    # -- control ---------------------------------------------------------------------------
+
+    def start(self, path: Path, robot: str, *, name: str | None = None) -> None:
+        """Run `python -u path robot` in the program's folder; returns once it has started."""
+        path = Path(path).resolve()
+        if not path.is_file():
+            raise FileNotFoundError(f"there is no program file {path.name!r}")
+        limits = self.limits
+        with self._lock:
+            if not self._done.is_set():
+                raise RuntimeError(f"{self._program!r} is still running; stop it first")
+            env = {**os.environ, **self.env, "ASIBOT_ROBOT": robot, "PYTHONUNBUFFERED": "1"}
+            proc = subprocess.Popen(
+                [self.python, "-u", str(path), robot],  # a list: no shell ever sees user input
+                cwd=path.parent, env=env,
+                stdin=subprocess.DEVNULL,  # input() gets EOF instead of blocking forever
+                stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                start_new_session=True,    # its own process group, so Stop reaches its children
+                preexec_fn=_limiter(limits))
+            self._proc = proc
+            self._program = name or path.stem
+            self._robot = robot
+            self._started = time.time()
+            self._stop_reason = None
+            self._ring.clear()
+            self._reaped.clear()
+            self._done.clear()
+            tail: collections.deque[str] = collections.deque(maxlen=STDERR_TAIL)
+            readers = [threading.Thread(target=self._read, args=(proc.stdout, "out", None),
+                                        name=f"runner-out-{proc.pid}", daemon=True),
+                       threading.Thread(target=self._read, args=(proc.stderr, "err", tail),
+                                        name=f"runner-err-{proc.pid}", daemon=True)]
+            for reader in readers:
+                reader.start()
+            self._waiter = threading.Thread(target=self._wait, args=(proc, path, limits, readers, tail),
+                                            name=f"runner-wait-{proc.pid}", daemon=True)
+            self._waiter.start()
+
+    def stop(self, reason: str = "stopped by the user") -> None:
+        """Stop the running program and every process of its group; returns once it is gone.
+
+        SIGTERM first so a program can clean up, SIGKILL after TERM_GRACE. Idempotent.
+        """
+        with self._lock:
+            proc, waiter = self._proc, self._waiter
+            if proc is None or self._done.is_set():
+                return
+            if self._stop_reason is None:
+                self._stop_reason = reason
+        self._signal(proc, signal.SIGTERM)
+        if not self._reaped.wait(TERM_GRACE):
+            self._signal(proc, signal.SIGKILL)
+            self._reaped.wait()
+        # The waiter tells the robot to stop and records the result; wait for that too, unless
+        # stop() is called from a callback on the waiter itself.
+        if waiter is not None and waiter is not threading.current_thread():
+            waiter.join(timeout=5.0)
+
+    def close(self) -> None:
+        """Stop a running program (the server is going away)."""
+        self.stop("stopped: the web server was shut down")
+
+    # -- state -----------------------------------------------------------------------------
+
+    def running(self) -> bool:
+        return not self._done.is_set()
+
+    def output(self) -> list[tuple[str, str]]:
+        """The newest output lines of the current (or last) run, as (stream, line)."""
+        with self._output_lock:
+            return list(self._ring)
+
+    def status(self) -> dict[str, Any]:
+        with self._lock:
+            running = not self._done.is_set()
+            return {"program": self._program or None, "robot": self._robot or None,
+                    "pid": self._proc.pid if running and self._proc else None,
+                    "running": running, "started": self._started or None,
+                    "last": dataclasses.asdict(self._last) if self._last else None}
+
+    # -- threads ---------------------------------------------------------------------------
+
+    def _read(self, stream: IO[bytes], name: str, tail: collections.deque[str] | None) -> None:
+        """Pass each line on, capped; an endless line is skipped past so it cannot fill memory."""
+        chars = self.limits.max_line_chars
+        try:
+            while True:
+                raw = stream.readline(4 * chars + 4)  # up to 4 bytes a character in UTF-8
+                if not raw:
+                    return
+                cut = False
+                if not raw.endswith(b"\n"):
+                    while True:  # the rest of an over-long line
+                        more = stream.readline(65536)
+                        if not more:
+                            break
+                        cut = True
+                        if more.endswith(b"\n"):
+                            break
+                line = raw.decode("utf-8", errors="replace").rstrip("\r\n")
+                if cut or len(line) > chars:
+                    line = line[:chars] + CUT_MARK
+                if tail is not None:
+                    tail.append(line)
+                with self._output_lock:
+                    self._ring.append((name, line))
+                    _call(self.on_output, name, line)
+        except (OSError, ValueError):
+            log.exception("reading the program's %s failed", name)
+        finally:
+            stream.close()
+
+    def _wait(self, proc: subprocess.Popen[bytes], path: Path, limits: Limits,
+              readers: list[threading.Thread], tail: collections.deque[str]) -> None:
+        pid = proc.pid
+        os.waitid(os.P_PID, pid, os.WEXITED | os.WNOWAIT)
+        # The exited leader is a zombie until reaped, which keeps its process group id ours:
+        # kill whatever it left in the group now, so no orphan keeps moving the arm.
+        with self._signal_lock:
+            _killpg(pid, signal.SIGKILL)
+            try:
+                _, status, usage = os.wait4(pid, 0)
+                code: int | None = os.waitstatus_to_exitcode(status)
+                cpu = usage.ru_utime + usage.ru_stime
+            except ChildProcessError:  # someone else reaped it; we know less
+                code, cpu = None, 0.0
+            proc.returncode = code if code is not None else -1  # Popen must not wait on the pid again
+            self._reaped.set()
+        with self._lock:
+            stop_reason = self._stop_reason
+        if stop_reason is not None or code != 0:
+            # First thing after it died: a crash mid-motion must not leave the arm moving.
+            _call(self.stop_robot, self._robot)
+        for reader in readers:
+            reader.join(timeout=2.0)  # a descendant that left the group may hold the pipe open
+        reason, ok = explain(code, cpu, list(tail), path, limits, stop_reason)
+        result = RunResult(program=self._program, robot=self._robot, started=self._started,
+                           ended=time.time(), exit_code=code, reason=reason, ok=ok)
+        with self._lock:
+            self._last = result
+            self._done.set()
+        _call(self.on_exit, result)
+
+    def _signal(self, proc: subprocess.Popen[bytes], sig: int) -> None:
+        with self._signal_lock:
+            if not self._reaped.is_set():
+                _killpg(proc.pid, sig)
+
+
+def explain(code: int | None, cpu_seconds: float, stderr_tail: list[str], path: Path,
+            limits: Limits, stop_reason: str | None = None) -> tuple[str, bool]:
+    """Why a run ended, as (sentence for the user, ok)."""
+    if stop_reason is not None:
+        return stop_reason, False
+    if code == -signal.SIGXCPU or (code == -signal.SIGKILL and cpu_seconds >= limits.cpu_seconds):
+        return f"stopped: it used all of its {limits.cpu_seconds} s of CPU time", False
+    text = "\n".join(stderr_tail)
+    # A SIGKILL that neither we nor the CPU limit sent is, on a robot PC, the kernel's OOM killer.
+    if code != 0 and (code == -signal.SIGKILL or any(m in text for m in _MEMORY_MARKERS)):
+        return f"stopped: it needed more memory than its limit of {limits.memory_bytes // 2**20} MiB", False
+    if code == 0:
+        return "finished", True
+    error = _traceback_error(stderr_tail, path)
+    if error is not None:
+        return error, False
+    if code is not None and code < 0:
+        return f"killed by signal {-code} ({signal.Signals(-code).name})", False
+    return f"exited with code {code}", False
+
+
+def _traceback_error(lines: list[str], path: Path) -> str | None:
+    """'failed with an error on line N: <message>' from the last traceback on stderr.
+
+    N is the line of the user's own file in the deepest frame that is theirs: an error inside
+    a library points at the user's line that called it. Syntax errors have no "Traceback"
+    header but the same `File "...", line N` frame.
+    """
+    starts = [i for i, line in enumerate(lines) if line.startswith("Traceback (most recent call last)")]
+    block = lines[starts[-1]:] if starts else lines
+    own = os.path.realpath(path)
+    line_no = None
+    for line in block:
+        m = _FRAME.match(line)
+        if m and os.path.realpath(m["file"]) == own:
+            line_no = int(m["line"])
+    messages = [line for line in block if line.strip() and not line[0].isspace()
+                and not line.startswith("Traceback (")]
+    if not messages or (line_no is None and not starts):
+        return None
+    message = messages[-1].strip()
+    if line_no is None:
+        return f"failed with an error: {message}"
+    return f"failed with an error on line {line_no}: {message}"
+
+
+def _limiter(limits: Limits) -> Callable[[], None]:
+    """The child's preexec_fn. It runs between fork and exec in a copy of a threaded server,
+    so it only calls setrlimit with numbers computed here, in the parent."""
+    cpu = (limits.cpu_seconds, limits.cpu_seconds + 5)  # SIGXCPU at the soft limit, SIGKILL at the hard
+    memory = (limits.memory_bytes, limits.memory_bytes)
+
+    def apply() -> None:
+        resource.setrlimit(resource.RLIMIT_CPU, cpu)
+        resource.setrlimit(resource.RLIMIT_DATA, memory)
+        resource.setrlimit(resource.RLIMIT_CORE, (0, 0))  # no core files of user programs on disk
+    return apply
+
+
+def _killpg(pgid: int, sig: int) -> None:
+    try:
+        os.killpg(pgid, sig)
+    except (ProcessLookupError, PermissionError):
+        pass  # the group is already empty
+
+
+def _call(callback: Callable[..., None] | None, *args: Any) -> None:
+    """Run a server callback; its failure must not kill the runner's threads."""
+    if callback is None:
+        return
+    try:
+        callback(*args)
+    except Exception:
+        log.exception("runner callback %r failed", callback)

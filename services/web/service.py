@@ -1,0 +1,124 @@
+"""The web service: the Task Creator page on http://127.0.0.1:8080/ (`python -m asibot.web`).
+
+It reaches the robots only through the bus, like any other service, and keeps the user's
+files in one data folder (`--data`, `ASIBOT_DATA`, or the XDG data folder).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import socket
+import threading
+from pathlib import Path
+
+import uvicorn
+
+from asibot import runtime
+from asibot.bus import Bus
+from asibot.web import lan as lan_access
+from asibot.web.app import Web, create_app
+from asibot.web.cameras import Cameras
+from asibot.web.fleet import Fleet
+from asibot.web.live import Live
+from asibot.web.motion import Motion
+from asibot.web.runner import ProgramRunner
+from asibot.web.userdata import UserData, default_root
+
+NAME = "web"
+
+log = logging.getLogger("asibot.web")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--host", default=None,
+                        help="address to serve on (default ASIBOT_WEB_HOST, else 127.0.0.1: this machine "
+                             "only; with --lan 0.0.0.0)")
+    parser.add_argument("--port", type=int, default=int(os.environ.get("ASIBOT_WEB_PORT", "8080")),
+                        help="port (default 8080, or ASIBOT_WEB_PORT)")
+    parser.add_argument("--data", type=Path, default=None,
+                        help="the user's files: points, programs, words, tasks, icons "
+                             "(default ASIBOT_DATA, else ~/.local/share/asibot)")
+    parser.add_argument("--lan", action="store_true",
+                        help="serve phones and tablets on the local network: HTTPS with a self-signed "
+                             "certificate and an access token (printed once, when it is made)")
+    parser.add_argument("--new-token", action="store_true", help="with --lan: replace the access token")
+
+
+class WebService(runtime.Service):
+    def __init__(self, bus: Bus, host: str, port: int, data: UserData, *, lan: bool = False,
+                 new_token: bool = False) -> None:
+        self.host, self.port = host, port
+        self.scheme = "https" if lan else "http"
+        live = Live(lambda robot: self.fleet.view(robot), lambda: self.fleet.views())
+        self.fleet = Fleet(bus, on_change=live.changed)
+        motion = Motion(bus)
+        runner = ProgramRunner(
+            env={"ASIBOT_ROUTER": bus.endpoint},
+            on_output=lambda stream, line: live.send({"type": "output", "stream": stream, "line": line}),
+            on_exit=lambda result: live.send({"type": "run", "status": self.web.runner.status()}),
+            stop_robot=lambda robot: _stop_quietly(motion, robot))
+        self.web = Web(fleet=self.fleet, motion=motion, data=data, runner=runner, live=live,
+                       cameras=Cameras(bus))
+        self.app = create_app(self.web)
+        tls: dict = {}
+        if lan:
+            folder = data.root / ".lan"
+            cert, key = lan_access.ensure_certificate(folder, lan_access.lan_addresses() + [socket.gethostname()])
+            token, made = lan_access.ensure_token(folder, renew=new_token)
+            self.app = lan_access.TokenGate(self.app, token)
+            tls = {"ssl_certfile": str(cert), "ssl_keyfile": str(key)}
+            where = lan_access.lan_addresses() or [socket.gethostname()]
+            if made:
+                for address in where:
+                    print(f"web: open https://{address}:{port}/?token={token} on a phone or tablet of this network "
+                          "(once; the browser keeps it). This token is shown only now.", flush=True)
+            else:
+                log.info("web on the LAN: https://%s:%d/ needs the token printed when it was made "
+                         "(--new-token makes another)", where[0], port)
+        self.server = uvicorn.Server(uvicorn.Config(self.app, host=host, port=port, log_level="warning",
+                                                    ws_ping_interval=5.0, ws_ping_timeout=5.0, **tls))
+        # uvicorn installs its own signal handlers in run(); the runtime owns the signals.
+        self.server.install_signal_handlers = lambda: None  # type: ignore[method-assign]
+
+    def health(self) -> dict:
+        return {"pages": len(self.web.live.pages), "running": self.web.runner.running(),
+                "url": f"{self.scheme}://{self.host}:{self.port}/"}
+
+    def run(self, stop: threading.Event) -> None:
+        threading.Thread(target=lambda: (stop.wait(), setattr(self.server, "should_exit", True)),
+                         daemon=True, name="web-stop").start()
+        log.info("web: %s://%s:%d/ (user files in %s)", self.scheme, self.host, self.port, self.web.data.root)
+        self.server.run()
+        if not stop.is_set() and not self.server.should_exit:
+            raise RuntimeError(f"the web server on {self.host}:{self.port} stopped by itself")
+
+    def close(self) -> None:
+        self.server.should_exit = True
+        self.web.runner.close()
+
+
+def _stop_quietly(motion: Motion, robot: str) -> None:
+    try:
+        motion.stop(robot)
+    except Exception as exc:  # the program is gone either way; say why the stop failed
+        log.warning("could not stop %s after its program ended: %s", robot, exc)
+
+
+def build(bus: Bus, args: argparse.Namespace) -> WebService:
+    if not 0 < args.port < 65536:
+        raise ValueError(f"--port must be 1 to 65535, got {args.port}")
+    root = args.data or default_root()
+    try:
+        data = UserData(root)
+    except OSError as exc:
+        raise ValueError(f"cannot use {root} for the user's files ({exc.strerror}); "
+                         "choose another folder with --data or ASIBOT_DATA") from None
+    host = args.host or ("0.0.0.0" if args.lan else os.environ.get("ASIBOT_WEB_HOST", "127.0.0.1"))
+    if args.new_token and not args.lan:
+        raise ValueError("--new-token is for --lan (the page on 127.0.0.1 needs no token)")
+    if host not in ("127.0.0.1", "localhost", "::1") and not args.lan and not os.environ.get("ASIBOT_WEB_HOST"):
+        raise ValueError(f"--host {host} serves the page beyond this machine: add --lan, which adds HTTPS "
+                         "and an access token, so nobody else on the network can move the robot")
+    return WebService(bus, host, args.port, data, lan=args.lan, new_token=args.new_token)

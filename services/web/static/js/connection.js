@@ -1,0 +1,62 @@
+// The Connection Manager, always on screen: the robots found on the bus (simulated and real side
+// by side, as the seed's connectSim / connectReal), which one the page commands, and whether its
+// driver and controller are alive, its emergency stop engaged, or a fault reported.
+import { api, choose, onChange, state } from './api.js';
+import { attempt, el } from './ui.js';
+
+function lamp(text, cls, title) {
+  return el('span', { class: `lamp ${cls}`, title }, text);
+}
+
+function card(robot) {
+  const chosen = robot.id === state.chosen;
+  const lamps = el('span', { class: 'lamps' },
+    lamp('Driver', robot.driver ? 'on' : 'off', robot.driver ? 'driver alive' : 'driver not running'),
+    lamp('Controller', robot.controller ? 'on' : 'off', robot.controller ? 'kinematics alive' : 'kinematics not running'),
+    robot.estop.engaged ? lamp('STOPPED', 'alarm', robot.estop.reason) : null,
+    robot.fault ? lamp('FAULT', 'alarm', robot.fault) : null);
+  const actions = [];
+  if (robot.estop.engaged) {
+    actions.push(el('button', {
+      type: 'button', 'aria-label': `Release emergency stop of ${robot.id}`,
+      onclick: () => attempt(() => api.post(`/api/robots/${robot.id}/release`),
+        `${robot.id}: emergency stop released. Nothing moves until you ask it to.`),
+    }, 'Release stop'));
+  }
+  if (robot.fault) {
+    actions.push(el('button', {
+      type: 'button', 'aria-label': `Reset fault of ${robot.id}`,
+      onclick: () => attempt(() => api.post(`/api/robots/${robot.id}/reset_fault`), `${robot.id}: fault cleared.`),
+    }, 'Reset fault'));
+  }
+  return el('div', { class: `robot-card${chosen ? ' chosen' : ''}`, dataset: { robot: robot.id } },
+    el('span', {}, el('span', { class: 'name' }, robot.id),
+      el('span', { class: 'kind' }, `${robot.simulated ? 'simulated' : 'real'} ${robot.arm || ''} ${robot.has_base ? '+ base' : ''}`)),
+    lamps,
+    el('button', {
+      type: 'button', 'aria-pressed': chosen ? 'true' : 'false', 'aria-label': `Command ${robot.id}`,
+      onclick: () => choose(robot.id),
+    }, chosen ? 'Commanding' : 'Command'),
+    actions);
+}
+
+export function mountConnection(root) {
+  const render = () => {
+    const robots = [...state.robots.values()].filter((r) => r.driver || r.controller);
+    if (!robots.length) {
+      root.replaceChildren(el('p', { class: 'none' },
+        state.feed === 'live' ? 'No robot found. Start the stack with `asibot up`.' : 'Waiting for the server…'));
+      return;
+    }
+    root.replaceChildren(...robots.map(card));
+  };
+  let last = '';
+  onChange(() => {
+    // Re-render only when what the cards show changed (not at every joint state).
+    const robots = [...state.robots.values()].map((r) =>
+      [r.id, r.driver, r.controller, r.estop.engaged, r.estop.reason, r.fault, r.arm]);
+    const key = JSON.stringify([state.chosen, state.feed, robots]);
+    if (key !== last) { last = key; render(); }
+  });
+  render();
+}

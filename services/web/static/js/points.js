@@ -1,0 +1,83 @@
+// Taught points: capture the arm's point (also while it moves), rename, delete, and go there
+// with one touch. Shared by the Joint and Cartesian pages; the Program page lists them too.
+import { api, state } from './api.js';
+import { attempt, el, fmt, notify } from './ui.js';
+
+const listeners = new Set();
+export function onPointsChange(fn) { listeners.add(fn); return () => listeners.delete(fn); }
+export async function loadPoints() {
+  const data = await api.get('/api/points');
+  for (const fn of listeners) fn(data);
+  return data;
+}
+
+function confirmable(label, ariaLabel, action) {
+  // First touch arms the button, the second within 4 s does it: no modal dialog to dismiss.
+  let armed = null;
+  const b = el('button', {
+    type: 'button', class: 'danger', 'aria-label': ariaLabel,
+    onclick: () => {
+      if (armed) { clearTimeout(armed); armed = null; b.textContent = label; action(); return; }
+      b.textContent = 'Sure? Touch again';
+      armed = setTimeout(() => { armed = null; b.textContent = label; }, 4000);
+    },
+  }, label);
+  return b;
+}
+
+function row(point) {
+  const li = el('li', { dataset: { point: point.name } });
+  const show = () => li.replaceChildren(
+    el('span', { class: 'pname' }, point.name),
+    el('span', { class: 'pvals' }, point.values.map((v, i) => fmt(v, i < 3 ? 3 : 1)).join('  ')),
+    el('button', {
+      type: 'button', class: 'primary', 'aria-label': `Go to ${point.name}`,
+      onclick: () => state.chosen && attempt(() => api.post(`/api/robots/${state.chosen}/points/${encodeURIComponent(point.name)}/go`, { kind: 'movj' }),
+        `Moving to ${point.name}.`),
+    }, 'Go'),
+    el('button', { type: 'button', 'aria-label': `Rename ${point.name}`, onclick: edit }, 'Rename'),
+    confirmable('Delete', `Delete ${point.name}`, () => attempt(async () => {
+      await api.del(`/api/points/${encodeURIComponent(point.name)}`);
+      await loadPoints();
+    }, `${point.name} deleted.`)));
+  const edit = () => {
+    const input = el('input', { type: 'text', value: point.name, 'aria-label': `New name for ${point.name}` });
+    const save = () => attempt(async () => {
+      await api.post(`/api/points/${encodeURIComponent(point.name)}/rename`, { name: input.value.trim() });
+      await loadPoints();
+    });
+    input.addEventListener('keydown', (e) => { if (e.key === 'Enter') save(); if (e.key === 'Escape') { e.stopPropagation(); show(); } });
+    li.replaceChildren(input, el('button', { type: 'button', class: 'primary', onclick: save }, 'Save name'),
+      el('button', { type: 'button', onclick: show }, 'Cancel'));
+    input.focus();
+    input.select();
+  };
+  show();
+  return li;
+}
+
+export function pointsPanel() {
+  const list = el('ul', { class: 'points', 'aria-label': 'Taught points' });
+  const name = el('input', { type: 'text', 'aria-label': 'Name of the next point', placeholder: 'point-1' });
+  const capture = el('button', {
+    type: 'button', class: 'primary capture',
+    onclick: () => attempt(async () => {
+      if (!state.chosen) throw new Error('Choose a robot in the Connection Manager first.');
+      const p = await api.post(`/api/robots/${state.chosen}/capture`, name.value.trim() ? { name: name.value.trim() } : {});
+      name.value = '';
+      await loadPoints();
+      return p;
+    }, (p) => `Captured ${p.name}.`),
+  }, 'Capture point');
+  const panel = el('section', { class: 'panel', 'aria-label': 'Points' },
+    el('h2', {}, 'Points'),
+    el('div', { class: 'row' }, capture, el('label', {}, 'Name ', name)),
+    list);
+  const off = onPointsChange((data) => {
+    name.placeholder = data.suggested;
+    list.replaceChildren(...(data.points.length ? data.points.map(row)
+      : [el('li', { class: 'muted' }, 'No points yet: move the arm and touch Capture point.')]));
+  });
+  loadPoints().catch((e) => notify(e.message));
+  return { panel, unmount: off };
+}

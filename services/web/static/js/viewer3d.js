@@ -1,0 +1,99 @@
+// The 3D view of the commanded robot: its URDF drawn with three.js and urdf-loader (bundled from
+// npm, served by our server), following the live joint state, plus a see-through "ghost" of a
+// target before it is sent.
+import * as THREE from '/static/vendor/three.js';
+import { api } from './api.js';
+import { el } from './ui.js';
+
+const SOLID = new THREE.MeshStandardMaterial({ color: 0x4f7fb0, metalness: 0.2, roughness: 0.55 });
+const GHOST = new THREE.MeshStandardMaterial({ color: 0xff9f1a, transparent: true, opacity: 0.35, depthWrite: false });
+
+function paint(robot, material) {
+  robot.traverse((o) => { if (o.isMesh) { o.material = material; o.castShadow = false; } });
+}
+
+export class RobotViewer {
+  constructor() {
+    this.root = el('div', { class: 'viewer', role: 'img', 'aria-label': '3D view of the robot' },
+      el('span', { class: 'legend' }, 'Blue: the arm now. Orange: the target before you send it.'));
+    this.renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+    this.renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
+    this.root.prepend(this.renderer.domElement);
+    this.scene = new THREE.Scene();
+    this.scene.background = new THREE.Color(0xe9eef2);
+    this.camera = new THREE.PerspectiveCamera(45, 4 / 3, 0.01, 50);
+    this.camera.position.set(1.6, 1.3, 1.6);
+    this.controls = new THREE.OrbitControls(this.camera, this.renderer.domElement);
+    this.controls.target.set(0, 0.5, 0);
+    this.controls.update();
+    this.scene.add(new THREE.HemisphereLight(0xffffff, 0x8899aa, 2.2));
+    const sun = new THREE.DirectionalLight(0xffffff, 1.6);
+    sun.position.set(2, 4, 3);
+    this.scene.add(sun);
+    const grid = new THREE.GridHelper(2, 20, 0x8899aa, 0xc5ced6);
+    this.scene.add(grid);
+    this.robotId = null;
+    this.robot = null;
+    this.ghost = null;
+    this.dirty = true;
+    this.controls.addEventListener('change', () => { this.dirty = true; });
+    new ResizeObserver(() => this.resize()).observe(this.root);
+    const loop = () => {
+      if (this.dirty && this.root.isConnected) { this.renderer.render(this.scene, this.camera); this.dirty = false; }
+      requestAnimationFrame(loop);
+    };
+    requestAnimationFrame(loop);
+  }
+
+  resize() {
+    const w = this.root.clientWidth, h = this.root.clientHeight;
+    if (!w || !h) return;
+    this.renderer.setSize(w, h, false);
+    this.camera.aspect = w / h;
+    this.camera.updateProjectionMatrix();
+    this.dirty = true;
+  }
+
+  async show(robotId) {
+    if (robotId === this.robotId) return;
+    this.robotId = robotId;
+    for (const r of [this.robot, this.ghost]) if (r) this.scene.remove(r);
+    this.robot = this.ghost = null;
+    if (!robotId) { this.dirty = true; return; }
+    const model = await api.get(`/api/robots/${robotId}/model`);
+    const loader = new THREE.URDFLoader();
+    const make = (material) => {
+      const robot = loader.parse(model.urdf);
+      robot.rotation.x = -Math.PI / 2;   // URDF is z-up, three.js is y-up
+      paint(robot, material);
+      this.scene.add(robot);
+      return robot;
+    };
+    this.robot = make(SOLID);
+    this.ghost = make(GHOST);
+    this.ghost.visible = false;
+    this.dirty = true;
+  }
+
+  // names and degrees, as the server's robot view gives them
+  setJoints(names, degrees) {
+    if (!this.robot) return;
+    names.forEach((name, i) => this.robot.setJointValue(name, THREE.MathUtils.degToRad(degrees[i])));
+    this.dirty = true;
+  }
+
+  showGhost(names, degrees) {
+    if (!this.ghost) return;
+    if (!names) { this.ghost.visible = false; this.dirty = true; return; }
+    names.forEach((name, i) => this.ghost.setJointValue(name, THREE.MathUtils.degToRad(degrees[i])));
+    this.ghost.visible = true;
+    this.dirty = true;
+  }
+}
+
+// One viewer for the whole page: views hand its element around instead of making new WebGL contexts.
+let shared = null;
+export function viewer() {
+  if (!shared) shared = new RobotViewer();
+  return shared;
+}

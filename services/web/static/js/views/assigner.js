@@ -1,0 +1,83 @@
+// Assigner tab: program + words + icon -> a task, the button the Launcher shows.
+import { api } from '../api.js';
+import { attempt, el, notify } from '../ui.js';
+
+export default {
+  id: 'assigner',
+  title: 'Assigner',
+  mount(root) {
+    const name = el('input', { type: 'text', 'aria-label': 'Task name', placeholder: 'Give me the red can' });
+    const program = el('select', { 'aria-label': 'Program' });
+    const words = el('div', { class: 'chips', role: 'group', 'aria-label': 'Words that launch it' });
+    const icons = el('div', { class: 'icons', role: 'radiogroup', 'aria-label': 'Icon' });
+    const tasks = el('ul', { class: 'points', 'aria-label': 'Tasks' });
+    const upload = el('input', { type: 'file', accept: 'image/png,image/jpeg,image/gif,image/webp', 'aria-label': 'Upload an icon' });
+    let icon = null;
+    let chosenWords = new Set();
+
+    const pickIcon = (n) => {
+      icon = n;
+      for (const b of icons.querySelectorAll('button')) b.setAttribute('aria-checked', String(b.dataset.icon === n));
+      for (const b of icons.querySelectorAll('button')) b.setAttribute('aria-pressed', String(b.dataset.icon === n));
+    };
+    const toggleWord = (w, b) => {
+      if (chosenWords.has(w)) chosenWords.delete(w); else chosenWords.add(w);
+      b.setAttribute('aria-pressed', String(chosenWords.has(w)));
+    };
+    const refresh = async () => {
+      const [p, w, i, t] = await Promise.all([api.get('/api/programs'), api.get('/api/words'), api.get('/api/icons'), api.get('/api/tasks')]);
+      const keep = program.value;
+      program.replaceChildren(...p.programs.map((n) => el('option', { value: n }, n)));
+      if (p.programs.includes(keep)) program.value = keep;
+      words.replaceChildren(...(w.words.length ? w.words.map((x) => {
+        const b = el('button', { type: 'button', 'aria-pressed': String(chosenWords.has(x)) }, x);
+        b.addEventListener('click', () => toggleWord(x, b));
+        return b;
+      }) : [el('span', { class: 'muted' }, 'No words yet: add them on the Speech page (a task also works by touch alone).')]));
+      icons.replaceChildren(...i.icons.map((x) => el('button', {
+        type: 'button', role: 'radio', 'aria-checked': String(x.name === icon), 'aria-pressed': String(x.name === icon),
+        'aria-label': `Icon ${x.name.replace(/\.[a-z]+$/, '')}`, dataset: { icon: x.name }, onclick: () => pickIcon(x.name),
+      }, el('img', { src: `/api/icons/${encodeURIComponent(x.name)}`, alt: '' }))));
+      tasks.replaceChildren(...(t.tasks.length ? t.tasks.map((x) => el('li', {},
+        el('img', { src: `/api/icons/${encodeURIComponent(x.icon)}`, alt: '', width: '48', height: '48' }),
+        el('span', { class: 'pname' }, x.name),
+        el('span', { class: 'pvals' }, `${x.program}.py${x.words.length ? ` · "${x.words.join('", "')}"` : ''}`),
+        el('button', {
+          type: 'button', 'aria-label': `Edit ${x.name}`, onclick: () => {
+            name.value = x.name; program.value = x.program; chosenWords = new Set(x.words); pickIcon(x.icon); refresh();
+          },
+        }, 'Edit'),
+        el('button', {
+          type: 'button', class: 'danger', 'aria-label': `Delete task ${x.name}`,
+          onclick: () => attempt(async () => { await api.del(`/api/tasks/${encodeURIComponent(x.name)}`); await refresh(); }, 'Task deleted.'),
+        }, 'Delete'))) : [el('li', { class: 'muted' }, 'No tasks yet.')]));
+    };
+    const save = () => attempt(async () => {
+      if (!icon) throw new Error('Choose an icon for the task.');
+      const r = await api.put(`/api/tasks/${encodeURIComponent(name.value.trim())}`,
+        { program: program.value, words: [...chosenWords], icon });
+      await refresh();
+      return r;
+    }, (r) => `Task "${r.name}" saved: it is on the Launcher.`);
+    upload.addEventListener('change', () => attempt(async () => {
+      const form = new FormData();
+      form.append('file', upload.files[0]);
+      const r = await api.post('/api/icons', form);
+      upload.value = '';
+      await refresh();
+      pickIcon(r.name);
+    }, 'Icon uploaded.'));
+    root.replaceChildren(el('div', { class: 'columns' },
+      el('section', { class: 'panel', 'aria-label': 'New task' },
+        el('h2', {}, 'Make a task'),
+        el('div', { class: 'row' }, el('label', {}, 'Task name ', name)),
+        el('div', { class: 'row' }, el('label', {}, 'Program ', program)),
+        el('h3', {}, 'Words that launch it'), words,
+        el('h3', {}, 'Icon'), icons,
+        el('div', { class: 'row' }, el('label', {}, 'Or upload an image: ', upload)),
+        el('div', { class: 'row' }, el('button', { type: 'button', class: 'primary big', onclick: save }, 'Save task'))),
+      el('section', { class: 'panel', 'aria-label': 'Tasks' }, el('h2', {}, 'Tasks'), tasks)));
+    refresh().catch((e) => notify(e.message));
+    return {};
+  },
+};

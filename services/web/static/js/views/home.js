@@ -1,0 +1,52 @@
+// Home tab: what this page is for, the robot it commands, and the Task Creator wizard.
+import { api, chosenRobot } from '../api.js';
+import { attempt, el } from '../ui.js';
+import { startWizard } from '../wizard.js';
+
+export default {
+  id: 'home',
+  title: 'Home',
+  mount(root) {
+    const status = el('p', { class: 'big', role: 'status' });
+    root.replaceChildren(
+      el('section', { class: 'panel' },
+        el('h2', {}, 'Teach the robot a task'),
+        el('p', {}, 'Move the arm, capture the points it should visit, write a short program with them, ',
+          'give it a word and an icon, and launch it from the Launcher with one touch.'),
+        status,
+        el('div', { class: 'row' },
+          el('button', { type: 'button', class: 'primary big', onclick: startWizard }, 'Start the Task Creator wizard'),
+          el('a', { href: '#launcher', class: 'button-link' }, 'Go to the Launcher'))),
+      el('section', { class: 'panel' },
+        el('h2', {}, 'Safety'),
+        el('p', {}, 'The red Emergency stop button at the top, or the Esc key, stops every robot and the running program at once. ',
+          'Release it in the Connection Manager; nothing moves again until you ask it to.')));
+    const upload = el('input', { type: 'file', accept: '.zip,application/zip', 'aria-label': 'Import ASIBOT user files (a zip)' });
+    const report = el('div', { role: 'status' });
+    upload.addEventListener('change', () => attempt(async () => {
+      const form = new FormData();
+      form.append('file', upload.files[0]);
+      const r = await api.post('/api/import', form);
+      upload.value = '';
+      report.replaceChildren(
+        el('p', {}, `Imported: ${r.imported.length ? r.imported.join(', ') : 'nothing'}.`),
+        r.skipped.length ? el('p', {}, `Left out: ${r.skipped.map((s) => `${s.item} (${s.reason})`).join('; ')}.`) : null,
+        ...r.notes.map((n) => el('p', { class: 'muted' }, n)));
+      return r;
+    }, (r) => `${r.imported.length} files imported.`));
+    root.append(el('section', { class: 'panel', 'aria-label': 'Your files' },
+      el('h2', {}, 'Your files'),
+      el('p', {}, 'Points, programs, words, tasks and icons, in the formats of the original ASIBOT Task Creator ',
+        '(points.ini, words.ini, <task>.task), so an existing user\'s files load.'),
+      el('div', { class: 'row' },
+        el('a', { href: '/api/export.zip', download: 'asibot-user-files.zip', class: 'button-link' }, 'Export my files'),
+        el('label', {}, 'Import ASIBOT files: ', upload)),
+      report));
+    const update = () => {
+      const r = chosenRobot();
+      status.textContent = r ? `Commanding ${r.id} (${r.simulated ? 'simulated' : 'real'} ${r.arm || 'robot'}).`
+        : 'No robot chosen yet: choose one in the Connection Manager at the top.';
+    };
+    return { update };
+  },
+};

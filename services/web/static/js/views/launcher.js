@@ -1,0 +1,33 @@
+// Launcher tab: one large button per task (the seed's "Multi-Modal Task Launcher"); the running
+// task is shown with its output and a Stop button.
+import { api, onMessage, state } from '../api.js';
+import { attempt, el, notify } from '../ui.js';
+import { outputPanel, stopProgramButton } from './program.js';
+
+export default {
+  id: 'launcher',
+  title: 'Launcher',
+  mount(root) {
+    const grid = el('div', { class: 'launcher', role: 'group', 'aria-label': 'Tasks' });
+    const output = outputPanel();
+    const refresh = async () => {
+      const { tasks } = await api.get('/api/tasks');
+      grid.replaceChildren(...(tasks.length ? tasks.map((t) => el('button', {
+        type: 'button', class: 'task-button', 'aria-label': `Launch ${t.name}`,
+        onclick: () => attempt(async () => {
+          if (!state.chosen) throw new Error('Choose a robot in the Connection Manager first.');
+          output.clear();
+          return api.post(`/api/tasks/${encodeURIComponent(t.name)}/launch`, { robot: state.chosen });
+        }, `${t.name}: started.`),
+      }, el('img', { src: `/api/icons/${encodeURIComponent(t.icon)}`, alt: '' }), t.name))
+        : [el('p', { class: 'muted' }, 'No tasks yet: make one on the Assigner page (or start the wizard from Home).')]));
+    };
+    root.replaceChildren(
+      el('section', { class: 'panel', 'aria-label': 'Launcher' }, el('h2', {}, 'Launch a task'), grid),
+      el('section', { class: 'panel', 'aria-label': 'Running task' },
+        el('h2', {}, 'Running task'), el('div', { class: 'row' }, stopProgramButton()), output.node));
+    const off = onMessage((msg) => { if (msg.type === 'tasks') refresh(); });
+    refresh().catch((e) => notify(e.message));
+    return { unmount: () => { off(); output.unmount(); } };
+  },
+};

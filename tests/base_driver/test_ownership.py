@@ -1,0 +1,99 @@
+"""Issue 10, finding 1 and 4, for the Pioneer: the driver obeys only the controller that holds
+the base (asibot.ownership); a cmd_vel stream that keeps coming through a pulled cable or an
+estop does not drive the base when it is back until the stream pauses (asibot.arming); the
+estop outlives whoever engaged it (asibot.estop).
+
+The service on the in-memory bus against the ARCOS emulator (a P3-AT over TCP)."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from asibot import keys, messages, ownership
+from asibot.bus import Bus
+from asibot.messages import COMMAND_WATCHDOG_S, EStop, Twist
+from asibot.testing import Inbox, Stream, wait_until
+
+from .conftest import ROBOT
+
+
+def stays_still(base, seconds: float) -> None:
+    """The emulated Pioneer is told no velocity, sampled throughout `seconds`."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        assert base.emulator.robot.target_vel == 0 and base.emulator.robot.target_rot == 0, "the base moved"
+        time.sleep(0.02)
+
+
+def events(base, code: str) -> list:
+    return [e for e in base.events.all() if e.code == code]
+
+
+def test_only_the_holders_cmd_vel_drives_the_base(base):
+    other = Bus("a-teleop-program")
+    try:
+        second = ownership.announce(other, ROBOT, "base", "teleop")
+        wait_until(lambda: second in base.svc.holder.alive, 5)
+        for controller in ("", "nav-0badc0de", second):       # anonymous, a stranger, the second one
+            base.user.put_raw(keys.base_cmd_vel(ROBOT), messages.pack({"vx": 0.3, "wz": 0.0,
+                                                                      "controller": controller}))
+        wait_until(lambda: events(base, "not_holder"), 5, message="no not_holder event")
+        stays_still(base, 0.3)
+        text = events(base, "not_holder")[0].text
+        assert text.startswith("Base command refused") and f"controller {base.controller!r} holds the base" in text
+        assert base.svc.not_holder == 3 and base.svc.driver.counters["cmd_vel"] == 0
+        base.user.publisher(keys.base_cmd_vel(ROBOT), Twist).put(Twist(vx=0.3, wz=0.0, controller=base.controller))
+        wait_until(lambda: base.emulator.robot.target_vel == 300, 3)
+    finally:
+        other.close()
+
+
+@pytest.mark.parametrize("interruption", ["cable", "estop"])
+def test_a_stream_through_an_interruption_drives_only_after_it_pauses(base, interruption):
+    """The stream goes on while the cable is out (or the estop engaged); when the base is back
+    it stays still, says it is ready, and drives only once the stream paused and restarted."""
+    cmd = base.user.publisher(keys.base_cmd_vel(ROBOT), Twist)
+    stream = Stream(lambda: cmd.put(Twist(vx=0.2, wz=0.0, controller=base.controller)))
+    try:
+        wait_until(lambda: base.emulator.robot.target_vel == 200, 3, message="the stream did not drive the base")
+        if interruption == "cable":
+            base.emulator.pull_cable(0.5)
+            wait_until(lambda: "disconnected" in base.codes(), 3)
+            wait_until(lambda: "ready" in base.codes()[base.codes().index("disconnected"):], 6,
+                       message="no reconnection")
+        else:
+            base.user.latch(keys.estop(ROBOT), EStop(engaged=True, reason="test"))
+            wait_until(lambda: events(base, "estop"), 3)
+            base.user.latch(keys.estop(ROBOT), EStop(engaged=False, by="a tester"))
+            wait_until(lambda: events(base, "ready"), 3)
+        back = time.monotonic()
+        wait_until(lambda: base.emulator.robot.target_vel == 0, 3)    # a fresh line, or the E_STOP
+        stays_still(base, 0.6)
+        assert stream.longest_gap(back) < COMMAND_WATCHDOG_S / 2, "the machine paused the stream itself"
+        wait_until(lambda: events(base, "not_ready"), 3, message="no not_ready event")
+        assert base.svc.driver.counters["not_ready"] > 0
+        stream.pause()
+        time.sleep(COMMAND_WATCHDOG_S)
+        stream.resume()
+        wait_until(lambda: base.emulator.robot.target_vel == 200, 3, message="the restarted stream did not drive")
+    finally:
+        stream.close()
+
+
+def test_the_estop_outlives_whoever_engaged_it_and_its_release_says_who(base):
+    with Bus("asibot-estop") as button:                   # engages and exits, as `asibot estop` does
+        button.latch(keys.estop(ROBOT), EStop(engaged=True, reason="test", by="ana@home (asibot estop, pid 7)"))
+        wait_until(lambda: events(base, "estop"), 3)
+    late = Bus("a-ui-started-later")
+    try:
+        learnt = Inbox()
+        late.subscribe(keys.estop(ROBOT), EStop, learnt, latest=True)
+        wait_until(lambda: len(learnt), 5, message="a late subscriber learnt nothing of the estop")
+        assert learnt.last().engaged and learnt.last().by == "ana@home (asibot estop, pid 7)"
+        late.latch(keys.estop(ROBOT), EStop(engaged=False, by="bob@home (asibot release, pid 8)"))
+        wait_until(lambda: events(base, "estop_released"), 3)
+        assert "released by bob@home (asibot release, pid 8)" in events(base, "estop_released")[0].text
+    finally:
+        late.close()

@@ -1,0 +1,129 @@
+"""AMCL against the tiny simulator's ground truth: tracking, kidnap, KLD, the motion model."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from asibot.nav.amcl import Amcl, AmclParams, kld_limit
+from asibot.nav.errors import NavError
+from asibot.nav.geometry import Pose
+
+from .tinysim import TinySim
+
+
+def drive(sim: TinySim, amcl: Amcl, vx: float, wz: float, seconds: float, dt: float = 0.05) -> None:
+    for k in range(int(round(seconds / dt))):
+        sim.step(vx, wz, dt)
+        if k % 2 == 0:                              # scans at 10 Hz
+            amcl.update(sim.odom, sim.scan())
+
+
+def error(sim: TinySim, amcl: Amcl) -> tuple[float, float]:
+    est = amcl.pose(sim.odom)
+    return sim.pose.distance(est), abs(math.remainder(sim.pose.theta - est.theta, 2 * math.pi))
+
+
+@pytest.fixture
+def station(world_places) -> Pose:
+    return world_places.get("charging station").pose
+
+
+def test_converges_from_the_charging_station_and_tracks(apartment, station):
+    sim = TinySim(apartment.grid, pose=station, odom=Pose(0.0, 0.0, 0.0), seed=2)
+    amcl = Amcl(apartment.grid, seed=2)
+    amcl.set_pose(station)                              # the robot starts docked: pose known roughly
+    assert amcl.estimate.particles == amcl.params.max_particles
+    drive(sim, amcl, 0.0, 0.8, 3.0)                     # turn to look around
+    drive(sim, amcl, 0.3, 0.0, 4.0)
+    drive(sim, amcl, 0.2, 0.4, 4.0)
+    d, a = error(sim, amcl)
+    assert d < 0.1 and a < math.radians(5)
+    est = amcl.estimate
+    assert est.particles <= 600                         # KLD shrank the set once it converged
+    assert est.std_xy < 0.2 and est.covariance.shape == (3, 3)
+    assert np.allclose(est.covariance, est.covariance.T)
+
+
+def test_relocalises_after_a_kidnap(apartment, station):
+    sim = TinySim(apartment.grid, pose=station, odom=Pose(0.0, 0.0, 0.0), seed=5)
+    amcl = Amcl(apartment.grid, seed=5)
+    amcl.set_pose(station)
+    drive(sim, amcl, 0.0, 0.8, 3.0)
+    drive(sim, amcl, 0.3, 0.0, 3.0)
+    assert error(sim, amcl)[0] < 0.1
+    sim.teleport(Pose(8.0, 2.0, 0.5))                   # carried to the other room; odometry saw nothing
+    assert error(sim, amcl)[0] > 5.0
+    injected = 0.0
+    for _ in range(10):
+        drive(sim, amcl, 0.0, 0.8, 2.0)
+        injected = max(injected, amcl.injection_share())
+        drive(sim, amcl, 0.15, 0.0, 1.0)
+        d, a = error(sim, amcl)
+        if d < 0.15 and a < math.radians(10):
+            break
+    assert injected > 0.05                              # random particles did the finding
+    assert d < 0.15 and a < math.radians(10), f"still lost: {d:.2f} m, {math.degrees(a):.0f} deg off"
+
+
+def test_global_localisation_spreads_over_free_space(apartment):
+    amcl = Amcl(apartment.grid, seed=1)
+    amcl.global_localization()
+    xy = amcl.poses[:, :2]
+    r, c = apartment.grid.info.to_cell(xy[:, 0], xy[:, 1])
+    assert (apartment.grid.data[r, c] == 0).all()
+    assert xy[:, 0].std() > 2.0 and not amcl.estimate.converged
+
+
+def test_motion_model_is_the_diff_corrected_one(apartment):
+    quiet = AmclParams(alpha1=0.0, alpha2=0.0, alpha3=0.0, alpha4=0.0)
+    amcl = Amcl(apartment.grid, quiet, seed=0)
+    amcl.set_pose(Pose(2.0, 2.0, 0.0), cov=(0.0, 0.0, 0.0))
+    amcl.motion(Pose(0.0, 0.0, 0.0), Pose(0.3, 0.4, 1.0))       # no noise: every particle moves exactly
+    assert np.allclose(amcl.poses, [2.3, 2.4, 1.0])
+    amcl.set_pose(Pose(2.0, 2.0, math.pi / 2), cov=(0.0, 0.0, 0.0))
+    amcl.motion(Pose(0.0, 0.0, 0.0), Pose(-0.5, 0.0, 0.0))      # backwards: no half turn
+    assert np.allclose(amcl.poses, [2.0, 1.5, math.pi / 2])
+    # with noise, the spread is sqrt(alpha3 * trans^2) along the motion: a standard deviation
+    noisy = Amcl(apartment.grid, AmclParams(alpha1=0.0, alpha2=0.0, alpha3=0.2, alpha4=0.0), seed=0)
+    noisy.set_pose(Pose(2.0, 2.0, 0.0), cov=(0.0, 0.0, 0.0))
+    noisy.motion(Pose(0.0, 0.0, 0.0), Pose(1.0, 0.0, 0.0))
+    assert noisy.poses[:, 0].std() == pytest.approx(math.sqrt(0.2), rel=0.1)
+
+
+def test_updates_only_after_the_minimum_travel(apartment, station):
+    amcl = Amcl(apartment.grid, seed=0)
+    amcl.set_pose(station)
+    sim = TinySim(apartment.grid, pose=station, odom=Pose(1.0, 1.0, 0.0))
+    assert amcl.update(sim.odom, sim.scan())                    # the first scan always updates
+    assert not amcl.update(Pose(1.1, 1.0, 0.05), sim.scan())    # 0.1 m, 0.05 rad: not yet
+    assert amcl.update(Pose(1.25, 1.0, 0.0), sim.scan())        # 0.25 m on x
+    moved = amcl.pose(Pose(1.35, 1.0, 0.0))                     # between updates: odometry carries it
+    assert moved.distance(amcl.estimate.pose) == pytest.approx(0.1, abs=1e-6)
+
+
+def test_kld_limit_is_amcls():
+    def pf_resample_limit(k, err=0.05, z=0.99):
+        b = 2 / (9 * (k - 1))
+        return math.ceil((k - 1) / (2 * err) * (1 - b + math.sqrt(b) * z) ** 3)
+    ks = np.array([2, 3, 10, 50, 200])
+    want = [min(5000, max(100, pf_resample_limit(k))) for k in ks]
+    assert kld_limit(ks, 0.05, 0.99, 100, 5000).tolist() == want
+    assert kld_limit(np.array([1]), 0.05, 0.99, 100, 5000).tolist() == [100]
+
+
+def test_bad_poses_are_sentences_and_change_nothing(apartment, station):
+    amcl = Amcl(apartment.grid, seed=0)
+    with pytest.raises(NavError, match="no starting point"):
+        amcl.update(station, None)
+    amcl.set_pose(station)
+    before = amcl.poses.copy()
+    with pytest.raises(NavError, match="outside the map"):
+        amcl.set_pose(Pose(40.0, 1.0, 0.0))
+    with pytest.raises(NavError, match="finite"):
+        amcl.set_pose(Pose(math.nan, 1.0, 0.0))
+    with pytest.raises(NavError, match="not finite"):
+        amcl.update(Pose(math.inf, 0.0, 0.0), None)
+    assert np.array_equal(amcl.poses, before)

@@ -1,0 +1,159 @@
+"""The navigator end to end in the tiny simulator: AMCL in the loop, judged by ground truth."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from asibot.nav.amcl import Amcl
+from asibot.nav.costmap import INSCRIBED, LETHAL, Costmap
+from asibot.nav.errors import NavError, Unreachable
+from asibot.nav.geometry import Pose
+from asibot.nav.local import LocalController
+from asibot.nav.navigator import ABORTED, ACTIVE, CANCELED, IDLE, PREEMPTED, SUCCEEDED, Navigator
+from asibot.nav.planner import GlobalPlanner
+
+from .tinysim import Harness, TinySim
+
+XY_TOL, YAW_TOL = 0.25, 0.25
+
+
+def make(apartment, start: Pose, seed: int = 3) -> Harness:
+    sim = TinySim(apartment.grid, pose=start, odom=Pose(0.0, 0.0, 0.0), seed=seed)
+    amcl = Amcl(apartment.grid, seed=seed)
+    amcl.set_pose(start)
+    h = Harness(sim, amcl, Navigator(Costmap(apartment.grid)))
+    h.localise()
+    return h
+
+
+def on_goal(sim: TinySim, goal: Pose) -> bool:
+    return sim.pose.distance(goal) <= XY_TOL and abs(math.remainder(sim.pose.theta - goal.theta, 2 * math.pi)) <= YAW_TOL
+
+
+@pytest.mark.slow
+def test_reaches_every_named_place(apartment, world_places):
+    h = make(apartment, world_places.get("charging station").pose)
+    for name in ("fridge", "desk", "shelf", "charging station"):
+        goal = world_places.get(name).pose
+        gid = h.nav.goto(h.now, goal, name, h.pose())
+        assert h.nav.status.state == ACTIVE and h.nav.status.text.startswith(f"driving to {name}")
+        h.run(lambda: h.nav.status.state != ACTIVE, limit=90.0)
+        status = h.nav.result(gid)
+        assert status.state == SUCCEEDED, status.text
+        assert status.text == f"arrived at {name}"
+        assert on_goal(h.sim, goal), f"{name}: at {h.sim.pose}, goal {goal}"
+        assert not h.sim.collided
+    speeds = np.array(h.commands)
+    assert np.abs(speeds[:, 0]).max() <= h.nav.controller.limits.max_vx + 1e-9
+    assert np.abs(speeds[:, 1]).max() <= h.nav.controller.limits.max_wz + 1e-9
+
+
+@pytest.mark.slow
+def test_avoids_a_box_that_is_not_on_the_map(apartment, world_places):
+    start, fridge = world_places.get("charging station").pose, world_places.get("fridge").pose
+    h = make(apartment, start)
+    first = GlobalPlanner().plan(h.nav.costmap, start, fridge)
+    # a box on the planned path in the fridge's room, unknown to the map
+    mid = first.points[np.argmin(np.abs(first.points[:, 0] - 6.5))]
+    box = (mid[0] - 0.2, mid[1] - 0.2, mid[0] + 0.2, mid[1] + 0.2)
+    h.sim.add_box(*box)
+    assert (h.nav.costmap.cost_at(mid[0], mid[1]) < INSCRIBED)
+    gid = h.nav.goto(h.now, fridge, "fridge", h.pose())
+    h.run(lambda: h.nav.status.state != ACTIVE, limit=90.0)
+    assert h.nav.result(gid).state == SUCCEEDED, h.nav.status.text
+    assert on_goal(h.sim, fridge) and not h.sim.collided
+    xs, ys = np.meshgrid(np.linspace(box[0], box[2], 9), np.linspace(box[1], box[3], 9))
+    assert (h.nav.costmap.cost_at(xs, ys) == LETHAL).sum() >= 5      # its sides, seen by the scan
+    path = h.nav.status.path
+    near = np.hypot(path.points[:, 0] - mid[0], path.points[:, 1] - mid[1]).min()
+    assert near > 0.45                                              # the last plan went around it
+
+
+def test_a_goal_inside_a_wall_fails_with_a_sentence(apartment, world_places):
+    h = make(apartment, world_places.get("charging station").pose)
+    with pytest.raises(Unreachable, match=r"inside an obstacle; the nearest free spot is \(") as err:
+        h.nav.goto(h.now, Pose(5.0, 2.0, 0.0), "the wall", h.pose())
+    assert err.value.code == "unreachable"
+    assert h.nav.status.state == IDLE and h.nav.step(h.now, h.pose(), None, None) is None
+
+
+def test_bad_goals_change_nothing(apartment, world_places):
+    h = make(apartment, world_places.get("charging station").pose)
+    gid = h.nav.goto(h.now, world_places.get("shelf").pose, "shelf", h.pose())
+    for _ in range(10):
+        h.step()
+    before = (h.nav.status.goal_id, h.nav.status.state, h.nav.status.goal)
+    for bad, words in (((math.nan, 1.0, 0.0), "x must be a finite number"),
+                       ((1.0, 2.0), "three numbers"),
+                       ((50.0, 1.0, 0.0), "outside the map"),
+                       ("fridge", "three numbers"),
+                       ((1.0, 1e300, 0.0), "not a place in a home")):
+        with pytest.raises(NavError, match=words):
+            h.nav.goto(h.now, bad, "", h.pose())
+    assert (h.nav.status.goal_id, h.nav.status.state, h.nav.status.goal) == before == (gid, ACTIVE, before[2])
+
+
+def test_cancel_and_preemption(apartment, world_places):
+    h = make(apartment, world_places.get("charging station").pose)
+    first = h.nav.goto(h.now, world_places.get("fridge").pose, "fridge", h.pose())
+    for _ in range(30):
+        h.step()
+    second = h.nav.goto(h.now, world_places.get("shelf").pose, "shelf", h.pose())
+    assert second != first
+    assert h.nav.result(first).state == PREEMPTED
+    assert "replaced by a new goal (shelf)" in h.nav.result(first).text
+    assert h.nav.status.state == ACTIVE and h.nav.status.place == "shelf"
+    for _ in range(20):
+        h.step()
+    assert h.nav.status.eta > 0 and h.nav.status.distance_remaining > 0.5
+    h.nav.cancel(h.now)
+    assert h.nav.result(second).state == CANCELED and "canceled" in h.nav.status.text
+    cmd = h.nav.step(h.now, h.pose(), h.sim.scan(), None)
+    assert cmd is not None and (cmd.vx, cmd.wz) == (0.0, 0.0)       # one stop, then nothing
+    assert h.nav.step(h.now, h.pose(), None, None) is None
+    with pytest.raises(NavError, match="no goal 99"):
+        h.nav.cancel(h.now, 99)
+
+
+def test_blocked_for_good_aborts_after_the_recoveries(apartment, world_places):
+    # the doorway to the fridge's room closed by a door the map does not know
+    start = world_places.get("charging station").pose
+    h = make(apartment, start)
+    h.sim.add_box(4.9, 2.9, 5.1, 4.4)
+    h.nav.params = type(h.nav.params)(progress_timeout=5.0, controller_patience=1.0)
+    gid = h.nav.goto(h.now, world_places.get("fridge").pose, "fridge", h.pose())
+    h.run(lambda: h.nav.status.state != ACTIVE, limit=150.0)
+    status = h.nav.result(gid)
+    assert status.state == ABORTED and not h.sim.collided
+    assert status.text.startswith("could not reach fridge: ")
+    assert "I tried" in status.text and "turning on the spot" in status.text
+    assert status.recoveries == 5
+
+
+def test_lost_localisation_aborts(apartment, world_places):
+    h = make(apartment, world_places.get("charging station").pose)
+    h.nav.goto(h.now, world_places.get("desk").pose, "desk", h.pose())
+    for k in range(25):
+        h.nav.step(h.now + 0.1 * k, h.pose(), None, None, localised=False)
+    assert h.nav.status.state == ABORTED and "not sure where I am" in h.nav.status.text
+    h.nav.goto(h.now, world_places.get("desk").pose, "desk", h.pose())
+    for k in range(25):                                          # a NaN pose is a lost robot, not a crash
+        cmd = h.nav.step(h.now + 0.1 * k, Pose(math.nan, 1.0, 0.0), h.sim.scan(), None)
+        assert cmd is None or (cmd.vx, cmd.wz) == (0.0, 0.0)
+    assert h.nav.status.state == ABORTED
+
+
+def test_local_controller_limits_and_blocking(apartment):
+    cm = Costmap(apartment.grid)
+    ctl = LocalController()
+    start, goal = Pose(1.0, 1.0, 0.0), Pose(3.5, 1.0, 0.0)
+    ctl.set_path(GlobalPlanner().plan(cm, start, goal))
+    c = ctl.compute(start, (0.0, 0.0), cm)
+    assert c.status == "moving" and 0 < c.vx <= ctl.limits.acc_x * ctl.params.period + 1e-9
+    cm.mark_points(np.linspace(1.3, 1.6, 7), np.full(7, 1.0), now=0.0)   # right in front
+    cm.mark_points(np.full(21, 1.45), np.linspace(0.5, 1.5, 21), now=0.0)
+    c = ctl.compute(start, (0.2, 0.0), cm)
+    assert c.status == "blocked" and "obstacle" in c.text and (c.vx, c.wz) == (0.0, 0.0)

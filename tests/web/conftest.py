@@ -1,0 +1,66 @@
+"""Browser tests: `asibot up` with the kitchen, its kinematics and the web page, and Debian's
+chromium driven by Playwright (never a downloaded browser)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from asibot.testing import Stack, wait_until
+
+ROOT = Path(__file__).resolve().parents[2]
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+SHOTS = ROOT / "tests" / "web" / "screenshots"
+
+
+@pytest.fixture(scope="module")
+def kitchen(tmp_path_factory):
+    """The kitchen simulation, its kinematics service and the web page, for one test module."""
+    stack = Stack(tmp_path_factory.mktemp("kitchen"), "sim", ["web", "kinematics-asibot-sim"], ROOT / "compose.yaml")
+    try:
+        stack.wait_alive("sim/asibot-sim", "kinematics/asibot-sim", "web/main", timeout=90)
+        import urllib.request
+
+        def page_served() -> bool:
+            try:
+                return urllib.request.urlopen(stack.web_url, timeout=2).status == 200
+            except OSError:
+                return False
+        wait_until(page_served, timeout=30, interval=0.3)
+        yield stack
+    finally:
+        stack.stop()
+
+
+@pytest.fixture(scope="module")
+def browser():
+    from playwright.sync_api import sync_playwright
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+@pytest.fixture
+def page(browser, kitchen):
+    """A fresh page on the Task Creator, ready (its script started and its feed live)."""
+    context = browser.new_context(viewport={"width": 1366, "height": 900})
+    page = context.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(kitchen.web_url)
+    page.wait_for_selector("body[data-ready=true]", timeout=15000)
+    page.wait_for_selector(".robot-card[data-robot=asibot-sim]", timeout=15000)
+    yield page
+    context.close()
+    assert not errors, f"the page raised: {errors}"
+
+
+def screenshot(page, name: str) -> Path:
+    SHOTS.mkdir(exist_ok=True)
+    path = SHOTS / f"{name}.png"
+    page.screenshot(path=str(path), full_page=True)
+    return path

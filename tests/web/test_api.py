@@ -1,0 +1,240 @@
+"""The web API on the in-memory bus: an ideal driver, the real kinematics server, the web app.
+
+What a page (or anything else) can send: every action answers JSON; every bad input gets a
+4xx with a sentence and changes nothing (no file written, no arm command sent).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from asibot import keys, robots
+from asibot.bus import Bus
+from asibot.kinematics.model import solver_for
+from asibot.kinematics.server import KinematicsServer
+from asibot.messages import EStop
+from asibot.testing import IdealDriver, memory_bus, wait_until
+from asibot.web import service
+
+ROBOT = "asibot-sim"
+START = np.radians([0.0, 20.0, 40.0, 30.0, 0.0])
+
+
+@pytest.fixture(scope="module")
+def web(tmp_path_factory):
+    with memory_bus("web-api"):
+        spec = robots.get(ROBOT)
+        driver = IdealDriver(ROBOT, spec)
+        driver.set_joints(START)
+        kin_bus = Bus("kinematics")
+        server = KinematicsServer(kin_bus, ROBOT, solver_for(spec), spec)
+        web_bus = Bus("web")
+        svc = service.build(web_bus, argparse.Namespace(host="127.0.0.1", port=8080, lan=False, new_token=False,
+                                                         data=tmp_path_factory.mktemp("data")))
+        client = TestClient(svc.app)
+        wait_until(lambda: ROBOT in svc.fleet.ids() and svc.fleet.point(ROBOT) is not None, timeout=10)
+        yield client, svc, driver, server
+        svc.close()
+        server.close()
+        driver.close()
+        for bus in (web_bus, kin_bus):
+            bus.close()
+
+
+@pytest.fixture
+def api(web):
+    client, svc, driver, server = web
+    server.ctl.stop()
+    wait_until(lambda: server.ctl.state == "not_controlling", timeout=2)
+    # The hold that a stop sends may still be on its way: wait until the driver hears nothing new.
+    seen = [len(driver.commands), time.monotonic()]
+
+    def quiet() -> bool:
+        if len(driver.commands) != seen[0]:
+            seen[:] = [len(driver.commands), time.monotonic()]
+        return time.monotonic() - seen[1] > 0.3
+    wait_until(quiet, timeout=5)
+    return client
+
+
+def refused(reply, status: int, *words: str) -> str:
+    assert reply.status_code == status, reply.text
+    body = reply.json()
+    assert isinstance(body["message"], str) and body["message"].endswith((".", ")", "'")), body
+    for w in words:
+        assert w in body["message"], body["message"]
+    return body["message"]
+
+
+def test_the_page_and_its_packages_are_served_locally(api):
+    assert "ASIBOT Task Creator" in api.get("/").text
+    for path in ("/static/js/main.js", "/static/vendor/three.js", "/static/vendor/codemirror.js", "/static/css/app.css"):
+        assert api.get(path).status_code == 200, path
+    html = api.get("/").text
+    assert "http://" not in html and "https://" not in html  # nothing from another server
+
+
+def test_robots_come_from_the_bus_with_their_state(web, api):
+    views = api.get("/api/robots").json()
+    me = next(v for v in views if v["id"] == ROBOT)
+    assert me["driver"] and me["controller"] and me["simulated"] and me["arm"] == "asibot"
+    assert me["joints"]["deg"] == pytest.approx(np.degrees(START).tolist(), abs=0.01)
+    assert len(me["point"]) == 5 and not me["estop"]["engaged"]
+    model = api.get(f"/api/robots/{ROBOT}/model").json()
+    assert "<robot" in model["urdf"] and model["joint_names"] == ["q1", "q2", "q3", "q4", "q5"]
+
+
+def test_a_joint_step_moves_one_joint_by_five_degrees(web, api):
+    client, svc, driver, server = web
+    before = server.ctl.q.copy()
+    assert api.post(f"/api/robots/{ROBOT}/step", json={"space": "joint", "axis": 1, "direction": 1, "level": 5}).status_code == 200
+    wait_until(lambda: server.ctl.state == "not_controlling", timeout=10)
+    wait_until(lambda: abs(server.ctl.q[1] - before[1] - math.radians(5)) < 1e-3, timeout=5)
+    assert np.allclose(np.delete(server.ctl.q, 1), np.delete(before, 1), atol=1e-3)
+
+
+def test_steps_touched_while_moving_add_up(web, api):
+    client, svc, driver, server = web
+    before = server.ctl.q.copy()
+    for _ in range(3):
+        assert api.post(f"/api/robots/{ROBOT}/step", json={"space": "joint", "axis": 0, "direction": -1, "level": 2}).status_code == 200
+    wait_until(lambda: server.ctl.state == "not_controlling", timeout=20)
+    wait_until(lambda: abs(server.ctl.q[0] - before[0] + math.radians(15)) < 1e-3, timeout=5)
+
+
+def test_capture_reads_the_arm_and_suggests_names(web, api):
+    client, svc, driver, server = web
+    p = api.post(f"/api/robots/{ROBOT}/capture", json={}).json()
+    assert p["name"].startswith("point-") and p["values"] == pytest.approx(svc.fleet.point(ROBOT), abs=1e-6)
+    named = api.post(f"/api/robots/{ROBOT}/capture", json={"name": "above_can"}).json()
+    assert named["name"] == "above_can"
+    names = [x["name"] for x in api.get("/api/points").json()["points"]]
+    assert p["name"] in names and "above_can" in names
+    refused(api.post(f"/api/robots/{ROBOT}/capture", json={"name": "above_can"}), 409, "above_can")
+
+
+def test_unreachable_and_limits_answer_with_the_controllers_sentence(api):
+    far = api.post(f"/api/robots/{ROBOT}/move", json={"kind": "movl", "values": [3, 0, 0, 0, 0]})
+    assert far.status_code == 409 and far.json()["error"] == "unreachable"
+    limit = api.post(f"/api/robots/{ROBOT}/move", json={"kind": "movj", "values": [0, 170, 0, 0, 0], "joints": True})
+    assert limit.status_code == 409 and "Joint 2" in limit.json()["message"]
+
+
+def test_estop_latches_and_refuses_motion_until_released(web, api):
+    client, svc, driver, server = web
+    assert api.post("/api/estop").json()["robots"] == [ROBOT]
+    wait_until(lambda: server.ctl.estop, timeout=5)
+    wait_until(lambda: svc.fleet.view(ROBOT)["estop"]["engaged"], timeout=5)
+    refused(api.post(f"/api/robots/{ROBOT}/step", json={"space": "joint", "axis": 0, "direction": 1}), 409)
+    assert api.post(f"/api/robots/{ROBOT}/release").status_code == 200
+    wait_until(lambda: not server.ctl.estop, timeout=5)
+
+
+@pytest.mark.parametrize("method,path,body,status,words", [
+    ("post", f"/api/robots/{ROBOT}/step", {"space": "joint", "axis": "x", "direction": 1}, 422, ["axis"]),
+    ("post", f"/api/robots/{ROBOT}/step", {"space": "joint", "axis": 9, "direction": 1}, 400, ["joint"]),
+    ("post", f"/api/robots/{ROBOT}/step", {"space": "up", "axis": 0, "direction": 1}, 422, ["space"]),
+    ("post", f"/api/robots/{ROBOT}/step", {"space": "joint", "axis": 0, "direction": 2}, 422, ["direction"]),
+    ("post", f"/api/robots/{ROBOT}/step", {"space": "joint", "axis": 0, "direction": 1, "level": 9}, 422, ["level"]),
+    ("post", f"/api/robots/{ROBOT}/step", {"space": "joint", "axis": 0, "direction": 1, "extra": 1}, 422, ["extra"]),
+    ("post", f"/api/robots/{ROBOT}/move", {"kind": "movl", "values": [1e300, 0, 0, 0, 0]}, 400, []),
+    ("post", f"/api/robots/{ROBOT}/move", {"kind": "movl", "values": ["a"] * 5}, 422, ["values"]),
+    ("post", f"/api/robots/{ROBOT}/move", {"kind": "movl", "values": [0] * 500}, 422, ["values"]),
+    ("post", f"/api/robots/{ROBOT}/move", {"kind": "teleport", "values": [0] * 5}, 422, ["kind"]),
+    ("post", "/api/robots/nobody/step", {"space": "joint", "axis": 0, "direction": 1}, 503, ["nobody"]),
+    ("post", "/api/robots/..%2Fetc/stop", {}, 404, []),
+    ("get", "/api/robots/nobody/model", None, 400, ["nobody"]),
+    ("post", f"/api/robots/{ROBOT}/gripper", {"close": "yes"}, 422, ["close"]),
+    ("post", f"/api/robots/{ROBOT}/inv", {"point": [0, 0]}, 422, ["point"]),
+    ("post", f"/api/robots/{ROBOT}/capture", {"name": "../../etc/passwd"}, 400, []),
+    ("post", "/api/points/nope/rename", {"name": "x"}, 404, ["nope"]),
+    ("delete", "/api/points/nope", None, 404, []),
+    ("post", f"/api/robots/{ROBOT}/points/nope/go", {}, 404, []),
+    ("post", "/api/programs", {"name": "../evil"}, 400, []),
+    ("post", "/api/programs", {"name": 7}, 422, ["name"]),
+    ("get", "/api/programs/nope", None, 404, []),
+    ("put", "/api/programs/nope", {"text": 5}, 422, ["text"]),
+    ("put", "/api/programs/a%2Fb", {"text": "x = 1"}, 404, []),
+    ("post", "/api/programs/nope/run", {"robot": ROBOT}, 404, []),
+    ("post", "/api/programs/nope/run", {"robot": "no robot!"}, 422, ["robot"]),
+    ("post", "/api/words", {"text": ""}, 422, ["text"]),
+    ("post", "/api/words", {"text": "a\nb"}, 400, []),
+    ("delete", "/api/words/nope", None, 404, []),
+    ("put", "/api/tasks/Give me", {"program": "nope", "icon": "can.svg"}, 404, ["nope"]),
+    ("put", "/api/tasks/Give me", {"program": "x", "words": "w", "icon": "can.svg"}, 422, ["words"]),
+    ("post", "/api/tasks/nope/launch", {"robot": ROBOT}, 404, []),
+    ("get", "/api/icons/nope.png", None, 404, []),
+    ("get", "/api/icons/..%2F..%2Fpasswd", None, 404, []),
+    ("post", "/api/check", {"text": None}, 422, ["text"]),
+])
+def test_bad_input_gets_a_sentence_and_changes_nothing(web, api, method, path, body, status, words):
+    client, svc, driver, server = web
+    data = svc.web.data
+    files_before = sorted(p.name for p in data.root.rglob("*"))
+    commands_before = len(driver.commands)
+    reply = getattr(api, method)(path, json=body) if body is not None else getattr(api, method)(path)
+    if status == 404 and reply.headers.get("content-type", "").startswith("application/json") and "message" not in reply.json():
+        assert reply.status_code == 404  # a route that does not exist
+    else:
+        refused(reply, status, *words)
+    assert sorted(p.name for p in data.root.rglob("*")) == files_before
+    assert len(driver.commands) == commands_before
+
+
+def test_oversized_bodies_and_uploads_are_refused(web, api):
+    refused(api.post("/api/programs", content=b"{" + b" " * 2_000_000 + b"}",
+                     headers={"content-type": "application/json"}), 413, "larger")
+    refused(api.post("/api/icons", files={"file": ("big.png", b"\x89PNG\r\n\x1a\n" + b"0" * (3 * 1024 * 1024), "image/png")}), 413)
+    refused(api.post("/api/icons", files={"file": ("evil.svg", b"<svg onload='alert(1)'/>", "image/svg+xml")}), 400)
+    refused(api.post("/api/import", files={"file": ("x.zip", b"not a zip", "application/zip")}), 400)
+
+
+def test_a_program_runs_in_its_own_process_and_its_output_is_kept(web, api):
+    assert api.post("/api/programs", json={"name": "hello_web"}).status_code == 200
+    text = "import os, sys\nprint('robot', sys.argv[1])\nprint('pid', os.getpid())\n"
+    assert api.put("/api/programs/hello_web", json={"text": text}).json()["problems"] == []
+    status = api.post("/api/programs/hello_web/run", json={"robot": ROBOT}).json()
+    assert status["running"] or status["last"]
+    wait_until(lambda: not api.get("/api/run").json()["running"], timeout=20)
+    run = api.get("/api/run").json()
+    assert run["last"]["reason"] == "finished"
+    lines = [line for stream, line in run["output"]]
+    assert f"robot {ROBOT}" in lines and not any(line == f"pid {__import__('os').getpid()}" for line in lines)
+    bad = api.put("/api/programs/hello_web", json={"text": "x = (\n"}).json()
+    assert bad["problems"][0]["line"] == 1
+    versions = api.get("/api/programs/hello_web").json()["versions"]
+    assert versions, "the previous version is kept"
+    restored = api.post(f"/api/programs/hello_web/versions/{versions[0]['id']}/restore").json()
+    assert restored["text"] == text
+
+
+def test_tasks_words_and_icons_round_trip_with_the_seed_files(api):
+    api.post("/api/programs", json={"name": "can_task"})
+    assert api.post("/api/words", json={"text": "give me the red can"}).status_code == 200
+    task = api.put("/api/tasks/Red can", json={"program": "can_task", "words": ["give me the red can"], "icon": "can.svg"}).json()
+    assert task == {"name": "Red can", "program": "can_task", "words": ["give me the red can"], "icon": "can.svg"}
+    icons = [i["name"] for i in api.get("/api/icons").json()["icons"]]
+    assert {"drink.svg", "can.svg", "face.svg", "teeth.svg", "home.svg", "stop.svg"} <= set(icons)
+    exported = api.get("/api/export.zip")
+    assert exported.status_code == 200 and exported.content[:2] == b"PK"
+    report = api.post("/api/import", files={"file": ("seed.zip", exported.content, "application/zip")}).json()
+    assert "Red can.task" in " ".join(report["imported"]) or report["imported"]
+    assert any(t["name"] == "Red can" for t in api.get("/api/tasks").json()["tasks"])
+
+
+def test_latched_estop_from_elsewhere_shows_on_the_page(web, api):
+    client, svc, driver, server = web
+    other = Bus("someone-else")
+    try:
+        other.latch(keys.estop(ROBOT), EStop(engaged=True, reason="pressed on the robot"))
+        wait_until(lambda: svc.fleet.view(ROBOT)["estop"] == {"engaged": True, "reason": "pressed on the robot"}, timeout=5)
+        other.latch(keys.estop(ROBOT), EStop(engaged=False, reason="released"))
+        wait_until(lambda: not svc.fleet.view(ROBOT)["estop"]["engaged"], timeout=5)
+    finally:
+        other.close()
