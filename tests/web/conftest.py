@@ -16,13 +16,13 @@ CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-
 SHOTS = ROOT / "tests" / "web" / "screenshots"
 
 
-@pytest.fixture(scope="module")
-def kitchen(tmp_path_factory):
-    """The kitchen simulation, its kinematics service and the web page, for one test module."""
-    stack = Stack(tmp_path_factory.mktemp("kitchen"), "sim", ["web", "kinematics-asibot-sim"], ROOT / "compose.yaml")
+def _stack(folder: Path, services: list[str], alive: list[str]):
+    """`asibot up --only SERVICES` with the web page, once every `alive` service announced itself
+    and the page is served."""
+    import urllib.request
+    stack = Stack(folder, "sim", ["web", *services], ROOT / "compose.yaml")
     try:
-        stack.wait_alive("sim/asibot-sim", "kinematics/asibot-sim", "web/main", timeout=90)
-        import urllib.request
+        stack.wait_alive(*alive, "web/main", timeout=90)
 
         def page_served() -> bool:
             try:
@@ -30,9 +30,26 @@ def kitchen(tmp_path_factory):
             except OSError:
                 return False
         wait_until(page_served, timeout=30, interval=0.3)
-        yield stack
-    finally:
+    except BaseException:
         stack.stop()
+        raise
+    return stack
+
+
+@pytest.fixture(scope="module")
+def kitchen(tmp_path_factory):
+    """The kitchen simulation, its kinematics service and the web page, for one test module."""
+    stack = _stack(tmp_path_factory.mktemp("kitchen"), ["kinematics-asibot-sim"], ["sim/asibot-sim", "kinematics/asibot-sim"])
+    yield stack
+    stack.stop()
+
+
+@pytest.fixture(scope="module")
+def apartment(tmp_path_factory):
+    """The apartment simulation with the Pioneer and its Katana arm, its kinematics and the page."""
+    stack = _stack(tmp_path_factory.mktemp("apartment"), ["kinematics-pioneer-sim"], ["sim/pioneer-sim", "kinematics/pioneer-sim"])
+    yield stack
+    stack.stop()
 
 
 @pytest.fixture(scope="module")

@@ -5,28 +5,40 @@ import { viewer } from '../viewer3d.js';
 import { cartesianControls } from './cartesian.js';
 import { jointControls } from './joint.js';
 
+function katana() {
+  return [...state.robots.values()].find((r) => r.arm === 'katana' && (r.driver || r.controller));
+}
+
 export default {
   id: 'pioneer',
   title: 'Pioneer arm',
   mount(root) {
-    const katana = [...state.robots.values()].find((r) => r.arm === 'katana' && (r.driver || r.controller));
-    if (!katana) {
-      root.replaceChildren(el('section', { class: 'panel' }, el('h2', {}, 'Pioneer arm'),
-        el('p', {}, 'No Pioneer with an arm is connected. `asibot up` starts pioneer-sim, the Pioneer P3-AT with its Katana arm in the apartment.')));
-      return {};
-    }
-    if (state.chosen !== katana.id) choose(katana.id);
-    const cart = cartesianControls();
-    let joints = null;
-    const left = el('div');
-    root.replaceChildren(el('p', { class: 'big' }, `This page commands ${katana.id}, the Katana arm on the Pioneer.`),
-      el('div', { class: 'columns' }, left,
-        el('div', {}, el('section', { class: 'panel', 'aria-label': '3D view' }, viewer().root), cart.panel)));
-    const update = (robot) => {
-      if (!joints && robot && robot.joints) { joints = jointControls(robot); left.replaceChildren(joints.panel); }
-      if (joints) joints.update(robot);
-      cart.update(robot);
+    let built = null;   // the controls, once a Pioneer with an arm is on the bus
+    const waiting = () => root.replaceChildren(el('section', { class: 'panel' }, el('h2', {}, 'Pioneer arm'),
+      el('p', {}, 'No Pioneer with an arm is connected. `asibot up` starts pioneer-sim, the Pioneer P3-AT with its Katana arm in the apartment.')));
+    const build = (robot) => {
+      if (state.chosen !== robot.id) choose(robot.id);
+      const cart = cartesianControls();
+      const left = el('div');
+      root.replaceChildren(el('p', { class: 'big' }, `This page commands ${robot.id}, the Katana arm on the Pioneer.`),
+        el('div', { class: 'columns' }, left,
+          el('div', {}, el('section', { class: 'panel', 'aria-label': '3D view' }, viewer().root), cart.panel)));
+      built = { cart, left, joints: null };
     };
+    // The robots may arrive after the tab opens (a page loaded straight on #pioneer).
+    const update = (robot) => {
+      if (!built) {
+        const k = katana();
+        if (!k) return;
+        build(k);
+        return;
+      }
+      if (!built.joints && robot && robot.joints) { built.joints = jointControls(robot); built.left.replaceChildren(built.joints.panel); }
+      if (built.joints) built.joints.update(robot);
+      built.cart.update(robot);
+    };
+    waiting();
+    update(null);
     return { update };
   },
 };
