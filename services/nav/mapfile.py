@@ -30,7 +30,7 @@ import yaml
 
 from asibot.errors import quote
 from asibot.nav.errors import MapError
-from asibot.nav.files import write_atomic
+from asibot.files import write_atomic
 from asibot.nav.geometry import Pose
 from asibot.nav.grid import GridInfo, OccupancyGrid
 

@@ -25,7 +25,7 @@ import yaml
 
 from asibot.errors import quote
 from asibot.nav.errors import NavError
-from asibot.nav.files import data_dir, write_atomic
+from asibot.files import data_dir, write_atomic
 from asibot.nav.geometry import Pose, as_pose
 from asibot.nav.grid import GridInfo
 

@@ -27,7 +27,6 @@ import math
 import os
 import re
 import stat
-import tempfile
 import threading
 import time
 import warnings
@@ -37,6 +36,8 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Callable, ParamSpec, TypeVar
+
+from asibot.files import data_dir, fsync_dir, write_atomic
 
 log = logging.getLogger(__name__)
 
@@ -254,41 +255,8 @@ def check_program(text: str) -> list[Problem]:
     return [Problem(w.lineno or 1, 1, f"Warning: {w.message}") for w in caught]
 
 
-def default_root() -> Path:
-    """Where the user's files live: $ASIBOT_DATA, else the XDG data folder, as users expect."""
-    if os.environ.get("ASIBOT_DATA"):
-        return Path(os.environ["ASIBOT_DATA"]).expanduser()
-    xdg = os.environ.get("XDG_DATA_HOME", "")
-    if xdg and os.path.isabs(xdg):  # the XDG spec says relative paths are to be ignored
-        return Path(xdg) / "asibot"
-    return Path.home() / ".local" / "share" / "asibot"
-
-
-# ---------------------------------------------------------------------------------- files
-
-def write_atomic(path: Path, data: bytes) -> None:
-    """Replace `path` by `data` whole or not at all: a crash leaves the old file intact."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-    _fsync_dir(path.parent)
-
-
-def _fsync_dir(folder: Path) -> None:
-    """The rename itself is only durable once the folder is synced."""
-    fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
+#: Where the user's files live: $ASIBOT_DATA, else the XDG data folder (asibot.files).
+default_root = data_dir
 
 
 def _decode(data: bytes) -> tuple[str, bool]:
@@ -517,7 +485,7 @@ class UserData:
         if (self.versions_dir / old).is_dir():
             with contextlib.suppress(OSError):  # a stale versions folder of `new`: keep both
                 os.rename(self.versions_dir / old, self.versions_dir / new)
-        _fsync_dir(self.root)
+        fsync_dir(self.root)
         for t in self.tasks():  # rewritten as they are: a task whose icon went stays as it was
             if t.program == old:
                 write_atomic(self._task_path(t.name), _task_text(new, t.words, t.icon))
@@ -537,7 +505,7 @@ class UserData:
         os.rename(path, self.trash_dir / f"{stamp}-{name}.py")
         if (self.versions_dir / name).is_dir():
             os.rename(self.versions_dir / name, self.trash_dir / f"{stamp}-{name}.versions")
-        _fsync_dir(self.root)
+        fsync_dir(self.root)
 
     def check_program(self, text: str) -> list[Problem]:
         """See the module function `check_program`."""
@@ -659,7 +627,7 @@ class UserData:
         if not path.is_file():
             raise NotFound(f"There is no task named {_quote(name)}.")
         os.rename(path, self.trash_dir / f"{self._trash_stamp()}-{path.name}")
-        _fsync_dir(self.root)
+        fsync_dir(self.root)
 
     def _task_path(self, name: str) -> Path:
         return self.root / f"{check_task_name(name)}.task"

@@ -164,7 +164,7 @@ def test_a_failed_save_leaves_the_old_map(tmp_path, monkeypatch):
 
     def boom(*_):
         raise OSError("disk full")
-    monkeypatch.setattr("asibot.nav.files.os.replace", boom)
+    monkeypatch.setattr("asibot.files.os.replace", boom)
     with pytest.raises(OSError):
         save_map(OccupancyGrid(info, np.full((2, 3), 100, np.int8)), tmp_path / "k.yaml")
     assert ((tmp_path / "k.pgm").read_bytes(), (tmp_path / "k.yaml").read_bytes()) == before

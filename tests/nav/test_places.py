@@ -83,7 +83,7 @@ def test_a_failed_write_changes_nothing(world_places, monkeypatch):
 
     def boom(*_):
         raise OSError("disk full")
-    monkeypatch.setattr("asibot.nav.files.os.replace", boom)
+    monkeypatch.setattr("asibot.files.os.replace", boom)
     with pytest.raises(OSError):
         world_places.remove("sofa")
     assert world_places.get("sofa").pose == Pose(2.0, 3.0, 0.0)

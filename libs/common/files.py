@@ -1,7 +1,8 @@
-"""Where navigation keeps the user's data, and how it writes a file so a crash never truncates it.
+"""The user's data folder and how a user file is written, so a crash never truncates it.
 
-The data folder is the one the web Task Creator uses (services/web/userdata.py): $ASIBOT_DATA,
-else $XDG_DATA_HOME/asibot, else ~/.local/share/asibot; navigation's files go in its `nav/`.
+One folder for everything a user makes (the web Task Creator's points, programs and tasks;
+navigation's places in its `nav/`): $ASIBOT_DATA, else $XDG_DATA_HOME/asibot, else
+~/.local/share/asibot, as users of other desktop programs expect.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from pathlib import Path
 
 
 def data_dir() -> Path:
+    """The user's data folder (see above)."""
     if os.environ.get("ASIBOT_DATA"):
         return Path(os.environ["ASIBOT_DATA"]).expanduser()
     xdg = os.environ.get("XDG_DATA_HOME", "")
@@ -34,9 +36,14 @@ def write_atomic(path: Path, data: bytes) -> None:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+    fsync_dir(path.parent)
+
+
+def fsync_dir(folder: Path) -> None:
+    """Make a rename (or a new file) in `folder` durable: only a synced folder keeps it."""
     with contextlib.suppress(OSError):  # some filesystems cannot sync a folder
-        dfd = os.open(path.parent, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+        fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
         try:
-            os.fsync(dfd)
+            os.fsync(fd)
         finally:
-            os.close(dfd)
+            os.close(fd)
