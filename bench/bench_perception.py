@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import math
 import os
-import time
 from typing import Callable
 
 os.environ.setdefault("MUJOCO_GL", "osmesa")
@@ -31,20 +30,14 @@ from asibot.perception.warnings import ObstacleWarner, clearance  # noqa: E402
 from asibot.sim.cameras import Camera  # noqa: E402
 from asibot.sim.simulation import Simulation  # noqa: E402
 
-from table import print_table  # bench/table.py: run as `python bench/<name>.py`
+from table import print_table, times  # bench/table.py: run as `python bench/<name>.py`
 
 ROWS: list[tuple[str, str, str, str, str]] = []
 
 
 def timed(fn: Callable[[], object], runs: int) -> tuple[float, float]:
     """(median, p95) of `runs` calls in ms, after a few warm-up calls."""
-    for _ in range(3):
-        fn()
-    t = np.empty(runs)
-    for i in range(runs):
-        start = time.perf_counter()
-        fn()
-        t[i] = time.perf_counter() - start
+    t = times(fn, runs, warmup=3)
     return float(np.median(t)) * 1e3, float(np.percentile(t, 95)) * 1e3
 
 

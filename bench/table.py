@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-from typing import Iterable, Sequence
+import time
+from typing import Callable, Iterable, Sequence
+
+import numpy as np
 
 
 def print_table(rows: Iterable[Sequence[object]],
@@ -12,3 +15,15 @@ def print_table(rows: Iterable[Sequence[object]],
     print("|" + "---|" * len(header))
     for row in rows:
         print("| " + " | ".join(f"{v:.3g}" if isinstance(v, float) else str(v) for v in row) + " |")
+
+
+def times(fn: Callable[[], object], runs: int, warmup: int = 1) -> np.ndarray:
+    """Seconds taken by each of `runs` calls of `fn`, after `warmup` calls that are not counted."""
+    for _ in range(warmup):
+        fn()
+    t = np.empty(runs)
+    for i in range(runs):
+        start = time.perf_counter()
+        fn()
+        t[i] = time.perf_counter() - start
+    return t

@@ -274,7 +274,7 @@ def test_missing_keepalive_makes_the_emulated_pioneer_stop(emulator):
 def test_driver_over_a_pty_device_path(tmp_path):
     """The emulator's pty stands in for /dev/ttyUSB0: a plain device path as --port."""
     path = str(tmp_path / "ttyPioneer")
-    with ArcosEmulator(pty_link=path) as emu:
+    with ArcosEmulator(pty_link=path):
         rec = Recorder()
         drv = BaseDriver(path, on_state=rec.state, on_event=rec.event)
         drv.start()

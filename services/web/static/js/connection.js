@@ -21,7 +21,7 @@ function card(robot) {
       type: 'button', 'aria-label': `Release emergency stop of ${robot.id}`,
       onclick: () => attempt(() => api.post(`/api/robots/${robot.id}/release`),
         `${robot.id}: emergency stop released. Nothing moves until you ask it to.`),
-    }, 'Release stop'));
+    }, 'Release emergency stop'));
   }
   if (robot.fault) {
     actions.push(el('button', {
@@ -33,8 +33,9 @@ function card(robot) {
     el('span', {}, el('span', { class: 'name' }, robot.id),
       el('span', { class: 'kind' }, `${robot.simulated ? 'simulated' : 'real'} ${robot.arm || ''} ${robot.has_base ? '+ base' : ''}`)),
     lamps,
+    // The name holds the word on the button (WCAG 2.5.3, label in name) and the robot's id.
     el('button', {
-      type: 'button', 'aria-pressed': chosen ? 'true' : 'false', 'aria-label': `Command ${robot.id}`,
+      type: 'button', 'aria-pressed': chosen ? 'true' : 'false', 'aria-label': `${chosen ? 'Commanding' : 'Command'} ${robot.id}`,
       onclick: () => choose(robot.id),
     }, chosen ? 'Commanding' : 'Command'),
     actions);

@@ -4,6 +4,8 @@
 // 15 deg) and Hold to move (the arm moves while the button is held: the page sends a beat every
 // BEAT_MS; it stops on pointer up, pointer cancel, lost capture, window blur and hidden tab, and
 // if the beats stop for any other reason the controller's 200 ms watchdog stops the arm).
+// With switch scanning (scanning.js) a hold cannot be held: a select starts the movement and the
+// next press of the switch stops it; the stops above still apply.
 import { api, chosenRobot, sendLive, state } from './api.js';
 import { attempt, el, fmt } from './ui.js';
 
@@ -16,14 +18,16 @@ const prefs = {
 };
 
 // --- hold-to-move: one held button at a time --------------------------------------------------
-let held = null;   // { timer, button }
+let held = null;   // { timer, button, unlatch? }
 
 function release() {
   if (!held) return;
-  clearInterval(held.timer);
-  held.button.classList.remove('active');
+  const was = held;
   held = null;
+  clearInterval(was.timer);
+  was.button.classList.remove('active');
   sendLive({ type: 'release' });
+  if (was.unlatch) was.unlatch();   // tell the scanner the movement ended (it moves on)
 }
 window.addEventListener('blur', release);
 document.addEventListener('visibilitychange', () => { if (document.hidden) release(); });
@@ -53,6 +57,13 @@ function holdable(button, beat) {
   });
   button.addEventListener('keyup', (e) => { if (e.key === ' ' || e.key === 'Enter') release(); });
   button.addEventListener('blur', release);
+  // Switch scanning's select: start, and hand the scanner the stop for the switch's next press.
+  button.addEventListener('scan:select', (e) => {
+    if (prefs.mode !== 'hold') return;
+    e.preventDefault();
+    startHold(button, beat);
+    held.unlatch = e.detail.latch(release);
+  });
 }
 
 // --- the controls ---------------------------------------------------------------------------

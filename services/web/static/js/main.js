@@ -2,6 +2,7 @@
 // emergency stop (button and Esc key), and the live feed that keeps every view current.
 import { api, chosenRobot, connectFeed, onChange, state } from './api.js';
 import { mountConnection } from './connection.js';
+import { startScanning } from './scanning.js';
 import { attempt, el, notify } from './ui.js';
 import { viewer } from './viewer3d.js';
 import { render as renderWizard } from './wizard.js';
@@ -14,8 +15,9 @@ import assigner from './views/assigner.js';
 import launcher from './views/launcher.js';
 import video from './views/video.js';
 import pioneer from './views/pioneer.js';
+import access from './views/access.js';
 
-const VIEWS = [home, joint, cartesian, program, speech, assigner, launcher, video, pioneer];
+const VIEWS = [home, joint, cartesian, program, speech, assigner, launcher, video, pioneer, access];
 let active = null;   // { view, handle }
 
 function emergencyStop() {
@@ -47,7 +49,9 @@ function tabs() {
   // Arrow keys move between tabs, as the ARIA tabs pattern says.
   bar.addEventListener('keydown', (e) => {
     if (e.key !== 'ArrowRight' && e.key !== 'ArrowLeft') return;
-    const i = VIEWS.indexOf(active.view) + (e.key === 'ArrowRight' ? 1 : -1);
+    // From the focused tab, not the shown view: the view follows the hash a moment later.
+    const from = VIEWS.findIndex((v) => v.id === e.target.dataset.view);
+    const i = from + (e.key === 'ArrowRight' ? 1 : -1);
     const next = VIEWS[(i + VIEWS.length) % VIEWS.length];
     location.hash = next.id;
     document.getElementById(`tab-${next.id}`).focus();
@@ -63,6 +67,7 @@ async function start() {
   state.config = await api.get('/api/config');
   tabs();
   mountConnection(document.getElementById('connection'));
+  startScanning();
   document.getElementById('estop').addEventListener('click', emergencyStop);
   document.addEventListener('keydown', (e) => { if (e.key === 'Escape') emergencyStop(); });
   window.addEventListener('hashchange', () => show(location.hash.slice(1)));

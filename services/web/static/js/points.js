@@ -1,7 +1,7 @@
 // Taught points: capture the arm's point (also while it moves), rename, delete, and go there
 // with one touch. Shared by the Joint and Cartesian pages; the Program page lists them too.
 import { api, state } from './api.js';
-import { attempt, el, fmt, notify } from './ui.js';
+import { attempt, confirmable, el, fmt, notify } from './ui.js';
 
 const listeners = new Set();
 export function onPointsChange(fn) { listeners.add(fn); return () => listeners.delete(fn); }
@@ -9,20 +9,6 @@ export async function loadPoints() {
   const data = await api.get('/api/points');
   for (const fn of listeners) fn(data);
   return data;
-}
-
-function confirmable(label, ariaLabel, action) {
-  // First touch arms the button, the second within 4 s does it: no modal dialog to dismiss.
-  let armed = null;
-  const b = el('button', {
-    type: 'button', class: 'danger', 'aria-label': ariaLabel,
-    onclick: () => {
-      if (armed) { clearTimeout(armed); armed = null; b.textContent = label; action(); return; }
-      b.textContent = 'Sure? Touch again';
-      armed = setTimeout(() => { armed = null; b.textContent = label; }, 4000);
-    },
-  }, label);
-  return b;
 }
 
 function row(point) {
@@ -36,7 +22,7 @@ function row(point) {
         `Moving to ${point.name}.`),
     }, 'Go'),
     el('button', { type: 'button', 'aria-label': `Rename ${point.name}`, onclick: edit }, 'Rename'),
-    confirmable('Delete', `Delete ${point.name}`, () => attempt(async () => {
+    confirmable('Delete', { 'aria-label': `Delete ${point.name}` }, () => attempt(async () => {
       await api.del(`/api/points/${encodeURIComponent(point.name)}`);
       await loadPoints();
     }, `${point.name} deleted.`)));

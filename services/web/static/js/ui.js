@@ -1,4 +1,5 @@
 // Small helpers to build the DOM and tell the user what happened.
+import { settings } from './settings.js';
 
 // el('button', {class: 'primary', onclick: f}, 'Run') -> <button class="primary">Run</button>
 export function el(tag, attrs = {}, ...children) {
@@ -18,18 +19,71 @@ export function el(tag, attrs = {}, ...children) {
   return node;
 }
 
+// Good news fades after FADE_MS unless the person keeps messages (Access page), and never while
+// the pointer is on it, focus is in it or the scanning ring is on it (WCAG 2.2.1: no time limit
+// the person cannot stop). Errors stay until dismissed.
+export const FADE_MS = 4000;
 let noticeTimer = null;
 
-// Show a sentence under the tabs: errors stay until dismissed, good news fades.
+function fadeLater(box) {
+  clearTimeout(noticeTimer);
+  noticeTimer = setTimeout(() => {
+    if (box.matches(':hover, :focus-within') || box.querySelector('[data-scanned]')) return;   // leaving restarts it
+    box.hidden = true;
+  }, FADE_MS);
+}
+
+function fades(box) { return box.classList.contains('info') && settings().messages === 'fade'; }
+
+let watched = false;
+function watch(box) {
+  if (watched) return;
+  watched = true;
+  const hold = () => clearTimeout(noticeTimer);
+  const resume = () => { if (!box.hidden && fades(box)) fadeLater(box); };
+  box.addEventListener('pointerenter', hold);
+  box.addEventListener('focusin', hold);
+  box.addEventListener('pointerleave', resume);
+  box.addEventListener('focusout', resume);
+}
+
+// Show a sentence under the tabs.
 export function notify(text, kind = 'error') {
   const box = document.getElementById('notice');
+  watch(box);
   box.replaceChildren(el('span', {}, text),
     el('button', { type: 'button', onclick: () => { box.hidden = true; } }, 'Dismiss'));
   box.className = kind === 'error' ? 'notice' : 'notice info';
   box.setAttribute('role', kind === 'error' ? 'alert' : 'status');
   box.hidden = false;
   clearTimeout(noticeTimer);
-  if (kind !== 'error') noticeTimer = setTimeout(() => { box.hidden = true; }, 4000);
+  if (fades(box)) fadeLater(box);
+}
+
+// A button that asks first: the first press arms it ("Sure? Touch again"), the second does it.
+// It stays armed until the person presses something else: no time limit, so a switch user who
+// scans back to it is not hurried.
+export function confirmable(label, attrs, action) {
+  const name = attrs['aria-label'];
+  let armed = false;
+  const disarm = (e) => {
+    if (e && b.contains(e.target)) return;
+    armed = false;
+    b.textContent = label;
+    if (name) b.setAttribute('aria-label', name);
+    document.removeEventListener('click', disarm, true);
+  };
+  const b = el('button', {
+    type: 'button', class: 'danger', ...attrs,
+    onclick: () => {
+      if (armed) { disarm(); action(); return; }
+      armed = true;
+      b.textContent = 'Sure? Touch again';
+      if (name) b.setAttribute('aria-label', `Sure? Touch again: ${name}`);
+      document.addEventListener('click', disarm, true);
+    },
+  }, label);
+  return b;
 }
 
 // Run an action; a refusal becomes a notice with the server's sentence, never a console error.

@@ -1,6 +1,7 @@
 // The 3D view of the commanded robot: its URDF drawn with three.js and urdf-loader (bundled from
 // npm, served by our server), following the live joint state, plus a see-through "ghost" of a
-// target before it is sent.
+// target before it is sent. Under it: Pause (the picture stops following the arm, WCAG 2.2.2) and
+// buttons that turn and zoom the view, so dragging is never the only way (WCAG 2.5.7, 2.1.1).
 import * as THREE from '/static/vendor/three.js';
 import { api } from './api.js';
 import { el } from './ui.js';
@@ -14,11 +15,23 @@ function paint(robot, material) {
 
 export class RobotViewer {
   constructor() {
-    this.root = el('div', { class: 'viewer', role: 'img', 'aria-label': '3D view of the robot' },
-      el('span', { class: 'legend' }, 'Blue: the arm now. Orange: the target before you send it.'));
+    this.picture = el('div', { class: 'viewer', role: 'img', 'aria-label': '3D view of the robot' });
+    this.legend = el('p', { class: 'legend', role: 'status' });
+    this.pauseButton = el('button', { type: 'button', 'aria-pressed': 'false', onclick: () => this.pause(!this.paused) }, 'Pause');
+    this.root = el('div', { class: 'viewer-box' }, this.picture,
+      el('div', { class: 'row viewer-bar', role: 'group', 'aria-label': '3D view controls' },
+        el('button', { type: 'button', onclick: () => this.turn(-1) }, 'Turn left'),
+        el('button', { type: 'button', onclick: () => this.turn(1) }, 'Turn right'),
+        el('button', { type: 'button', onclick: () => this.zoom(0.8) }, 'Closer'),
+        el('button', { type: 'button', onclick: () => this.zoom(1.25) }, 'Farther'),
+        this.pauseButton),
+      this.legend);
+    this.paused = false;
+    this.latest = null;   // the joints that came while paused
+    this.pause(false);
     this.renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
     this.renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
-    this.root.prepend(this.renderer.domElement);
+    this.picture.prepend(this.renderer.domElement);
     this.scene = new THREE.Scene();
     this.scene.background = new THREE.Color(0xe9eef2);
     this.camera = new THREE.PerspectiveCamera(45, 4 / 3, 0.01, 50);
@@ -37,16 +50,16 @@ export class RobotViewer {
     this.ghost = null;
     this.dirty = true;
     this.controls.addEventListener('change', () => { this.dirty = true; });
-    new ResizeObserver(() => this.resize()).observe(this.root);
+    new ResizeObserver(() => this.resize()).observe(this.picture);
     const loop = () => {
-      if (this.dirty && this.root.isConnected) { this.renderer.render(this.scene, this.camera); this.dirty = false; }
+      if (this.dirty && this.picture.isConnected) { this.renderer.render(this.scene, this.camera); this.dirty = false; }
       requestAnimationFrame(loop);
     };
     requestAnimationFrame(loop);
   }
 
   resize() {
-    const w = this.root.clientWidth, h = this.root.clientHeight;
+    const w = this.picture.clientWidth, h = this.picture.clientHeight;
     if (!w || !h) return;
     this.renderer.setSize(w, h, false);
     this.camera.aspect = w / h;
@@ -75,9 +88,36 @@ export class RobotViewer {
     this.dirty = true;
   }
 
+  // Paused, the picture keeps the arm where it was; resuming shows where it is now.
+  pause(on) {
+    this.paused = on;
+    this.pauseButton.setAttribute('aria-pressed', String(on));
+    this.legend.textContent = on ? 'Paused: the picture shows the arm as it was. Touch Pause again to follow it.'
+      : 'Blue: the arm now. Orange: the target before you send it.';
+    if (!on && this.latest) this.setJoints(...this.latest);
+  }
+
+  // Turn the camera around the robot by 20 degrees (direction -1 or 1), or move it closer/farther.
+  turn(direction) {
+    const offset = this.camera.position.clone().sub(this.controls.target);
+    offset.applyAxisAngle(new THREE.Vector3(0, 1, 0), direction * THREE.MathUtils.degToRad(20));
+    this.camera.position.copy(this.controls.target).add(offset);
+    this.controls.update();
+    this.dirty = true;
+  }
+
+  zoom(factor) {
+    const offset = this.camera.position.clone().sub(this.controls.target);
+    const length = THREE.MathUtils.clamp(offset.length() * factor, 0.4, 8);
+    this.camera.position.copy(this.controls.target).add(offset.setLength(length));
+    this.controls.update();
+    this.dirty = true;
+  }
+
   // names and degrees, as the server's robot view gives them
   setJoints(names, degrees) {
-    if (!this.robot) return;
+    this.latest = [names, degrees];
+    if (!this.robot || this.paused) return;
     names.forEach((name, i) => this.robot.setJointValue(name, THREE.MathUtils.degToRad(degrees[i])));
     this.dirty = true;
   }

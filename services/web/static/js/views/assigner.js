@@ -18,7 +18,6 @@ export default {
     const pickIcon = (n) => {
       icon = n;
       for (const b of icons.querySelectorAll('button')) b.setAttribute('aria-checked', String(b.dataset.icon === n));
-      for (const b of icons.querySelectorAll('button')) b.setAttribute('aria-pressed', String(b.dataset.icon === n));
     };
     const toggleWord = (w, b) => {
       if (chosenWords.has(w)) chosenWords.delete(w); else chosenWords.add(w);
@@ -35,7 +34,7 @@ export default {
         return b;
       }) : [el('span', { class: 'muted' }, 'No words yet: add them on the Speech page (a task also works by touch alone).')]));
       icons.replaceChildren(...i.icons.map((x) => el('button', {
-        type: 'button', role: 'radio', 'aria-checked': String(x.name === icon), 'aria-pressed': String(x.name === icon),
+        type: 'button', role: 'radio', 'aria-checked': String(x.name === icon),
         'aria-label': `Icon ${x.name.replace(/\.[a-z]+$/, '')}`, dataset: { icon: x.name }, onclick: () => pickIcon(x.name),
       }, el('img', { src: `/api/icons/${encodeURIComponent(x.name)}`, alt: '' }))));
       tasks.replaceChildren(...(t.tasks.length ? t.tasks.map((x) => el('li', {},

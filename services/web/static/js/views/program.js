@@ -5,7 +5,7 @@
 import { EditorView, basicSetup, python, keymap } from '/static/vendor/codemirror.js';
 import { api, onMessage, state } from '../api.js';
 import { loadPoints, onPointsChange } from '../points.js';
-import { attempt, el, notify } from '../ui.js';
+import { attempt, confirmable, el, notify } from '../ui.js';
 
 let current = sessionStorage.getItem('asibot.program');  // the program open in the editor
 
@@ -133,22 +133,12 @@ export default {
       title.after(bar);
       input.focus();
     };
-    let deleteArmed = null;
-    const del = (b) => {
-      if (!current) return;
-      if (!deleteArmed) {
-        b.textContent = 'Sure? Touch again';
-        deleteArmed = setTimeout(() => { deleteArmed = null; b.textContent = 'Delete'; }, 4000);
-        return;
-      }
-      clearTimeout(deleteArmed); deleteArmed = null; b.textContent = 'Delete';
-      attempt(async () => {
-        await api.del(`/api/programs/${encodeURIComponent(current)}`);
-        current = null; sessionStorage.removeItem('asibot.program');
-        title.textContent = 'No program open'; setText('');
-        await refreshList();
-      }, 'Program deleted (kept in the trash of the data folder).');
-    };
+    const del = () => current && attempt(async () => {
+      await api.del(`/api/programs/${encodeURIComponent(current)}`);
+      current = null; sessionStorage.removeItem('asibot.program');
+      title.textContent = 'No program open'; setText('');
+      await refreshList();
+    }, 'Program deleted (kept in the trash of the data folder).');
     const insertPoint = (p) => {
       const v = variable(p.name);
       const client = clientName(text());
@@ -193,7 +183,7 @@ export default {
             }, (r) => (r.problems.length ? 'Syntax error: see below.' : 'No syntax errors.')),
           }, 'Check syntax'),
           el('button', { type: 'button', onclick: rename }, 'Rename'),
-          el('button', { type: 'button', class: 'danger', onclick: (e) => del(e.currentTarget) }, 'Delete')),
+          confirmable('Delete', {}, del)),
         el('h3', {}, 'Insert a point (at the cursor: the point and a movl to it)'), pointButtons,
         holder, problems,
         el('h3', {}, 'Previous versions'), versions)));

@@ -1,0 +1,175 @@
+"""Voice recognition figures, each beside a reference measured in the same run.
+
+Prints one markdown table, then the recognition rates. Inputs are espeak-ng speech made at
+the start (5 voices x 3 speeds; the 4 phrases of the tests, stop, yes, no, and 15 phrases
+that are not in the grammar). References: the utterance's own duration (so p50 / duration
+is the real-time factor), pocketsphinx's decode alone (what our three rejection checks add
+to it), numpy's FFT resampling of the same audio (the floor of any whole-buffer resampler;
+ours streams), and the bare float32 -> mono decode.
+
+Run: `.venv/bin/python bench/bench_voice.py`
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from asibot.voice.audio import AudioFormat, Converter, decode, read_wav
+from asibot.voice.grammar import Lexicon, build_grammar
+from asibot.voice.recognizer import Listener, Recognizer
+from asibot.voice.speaker import Speaker
+from asibot.voice.vad import Vad
+
+from table import print_table, times  # bench/table.py: run as `python bench/<name>.py`
+
+ASSIGNED = ["give me the red can", "open the fridge", "go to the desk", "drink"]
+IN_GRAMMAR = ASSIGNED + ["stop", "yes", "no"]
+OUT_OF_GRAMMAR = ["what is the weather like today", "turn on the television please", "hello robot",
+                  "open the window", "give me the blue cup", "drink some water", "bring me a towel",
+                  "where are my glasses", "call my daughter", "the cat is sleeping", "good morning",
+                  "I am hungry", "close the door", "red", "can you hear me"]
+VOICES = ["en-us", "en-us+m1", "en-us+f3", "en-us+m3", "en"]
+SPEEDS = [120, 150, 180]
+ROWS: list[tuple[str, str, str, str, str]] = []
+
+
+def row(what: str, t: np.ndarray, unit: str = "ms", ref: str = "", scale: float = 1e3) -> None:
+    ROWS.append((what, f"{np.percentile(t, 50) * scale:.2f}", f"{np.percentile(t, 99) * scale:.2f}", unit, ref))
+
+
+def speak(folder: Path, text: str, voice: str, speed: int) -> np.ndarray:
+    path = folder / "x.wav"
+    subprocess.run(["espeak-ng", "-v", voice, "-s", str(speed), "-w", str(path), text], check=True)
+    return read_wav(path)
+
+
+def main() -> None:
+    if shutil.which("espeak-ng") is None:
+        raise SystemExit("bench_voice needs espeak-ng: sudo apt-get install espeak-ng")
+    folder = Path(tempfile.mkdtemp())
+    corpus = [(text, text in IN_GRAMMAR, voice, speed, speak(folder, text, voice, speed))
+              for voice, speed in itertools.product(VOICES, SPEEDS) for text in IN_GRAMMAR + OUT_OF_GRAMMAR]
+    shutil.rmtree(folder)
+    recognizer = Recognizer(build_grammar(ASSIGNED))
+
+    # recognition, per utterance (every clip of the corpus, so p99 is over 330 utterances)
+    decodes, seconds, verdicts = [], [], []
+    for text, inside, voice, speed, x in corpus:
+        d = recognizer.decode(x)
+        decodes.append(d.decode_seconds)
+        seconds.append(len(x) / 16000)
+        verdicts.append((text, inside, voice, speed, d))
+    decodes, seconds = np.array(decodes), np.array(seconds)
+    row("recognise one utterance (pocketsphinx + the 3 checks), 7 phrases", decodes, ref="")
+    d = recognizer._decoder
+    bare = []
+    for *_, x in corpus[:60]:
+        t0 = time.perf_counter()
+        d.start_utt()
+        d.process_raw(x.tobytes(), full_utt=True)
+        d.end_utt()
+        bare.append(time.perf_counter() - t0)
+    row("  reference: pocketsphinx decode alone (60 utterances)", np.array(bare))
+    row("  reference: the utterance's duration", seconds)
+    rtf = decodes / seconds
+    ROWS.append(("  real-time factor (recognise / duration)", f"{np.percentile(rtf, 50):.3f}",
+                 f"{np.percentile(rtf, 99):.3f}", "", "< 1: faster than speech"))
+    big = Recognizer(build_grammar([f"{a} the {b} {c}" for a in ("give me", "bring me", "open", "close")
+                                    for b in ("red", "blue", "green", "small", "big")
+                                    for c in ("can", "cup", "box", "door", "bottle")]))
+    row("recognise one utterance, 103 phrases", times(lambda: big.decode(corpus[1][4]), 30))
+
+    # audio in: one second of browser audio (48 kHz stereo float32) to 16 kHz
+    rng = np.random.default_rng(0)
+    second = (rng.standard_normal((48000, 2)) * 0.05).astype(np.float32)
+    fmt = AudioFormat(48000, "float32", 2)
+    conv = Converter(fmt)
+    chunks = [second[i:i + 960] for i in range(0, 48000, 960)]          # 20 ms chunks
+    row("1 s of 48 kHz stereo float32 -> 16 kHz, in 20 ms chunks", times(lambda: [conv.convert(c) for c in chunks], 30),
+        "ms per s")
+    row("  same, one 1 s chunk", times(lambda: conv.convert(second), 30), "ms per s")
+    mono = second.mean(axis=1)
+    row("  reference: numpy FFT resample of the 1 s (whole buffer)",
+        times(lambda: np.fft.irfft(np.fft.rfft(mono)[:8001], 16000), 30), "ms per s")
+    row("  reference: float32 stereo -> mono check only", times(lambda: decode(second, fmt), 30), "ms per s")
+    conv44 = Converter(AudioFormat(44100, "float32", 2))
+    second44 = second[:44100]
+    row("1 s of 44.1 kHz stereo float32 -> 16 kHz (160/441 polyphase)", times(lambda: conv44.convert(second44), 30),
+        "ms per s")
+
+    # VAD and the whole listener on a quiet stream (the common case: nobody speaks)
+    quiet = (rng.standard_normal(16000) * 30).astype(np.int16)
+    vad = Vad()
+    row("VAD, 1 s of 16 kHz audio in 20 ms chunks", times(lambda: [vad.feed(quiet[i:i + 320])
+                                                               for i in range(0, 16000, 320)], 30), "ms per s")
+    listener = Listener(recognizer, fmt)
+    quiet48 = (rng.standard_normal((48000, 2)) * 0.001).astype(np.float32)
+    chunks48 = [quiet48[i:i + 960] for i in range(0, 48000, 960)]
+    row("Listener (resample + VAD), 1 s of quiet 48 kHz stereo in 20 ms chunks",
+        times(lambda: [listener.feed(c) for c in chunks48], 30), "ms per s", "budget 1000 (real time)")
+
+    # grammar changes
+    lex = Lexicon()
+    for n in (4, 50, 200):
+        words = [f"{a} {b} {c}" for a in ("give", "bring", "open", "close", "find") for b in ("me", "the", "a", "my")
+                 for c in ("can", "cup", "box", "door", "bottle", "book", "phone", "pen", "glass", "plate")][:n]
+        row(f"rebuild: build_grammar + set_grammar, {n} phrases", _rebuild_times(recognizer, words, lex))
+    recognizer.set_grammar(build_grammar(ASSIGNED, lex))
+
+    speaker = Speaker()
+    row("speaker: synthesize 'Sorry, I did not understand.'",
+        times(lambda: speaker.synthesize("Sorry, I did not understand."), 10))
+    mute = Speaker(player=[sys.executable, "-c", "import sys; sys.stdin.buffer.read()"])
+    row("speaker: say() returns (speech goes on in the background)",
+        times(lambda: mute.say("I will give you the red can."), 10))
+    mute.wait(10)
+
+    print(f"voice benchmark: {len(corpus)} espeak-ng utterances ({len(VOICES)} voices x {len(SPEEDS)} speeds), "
+          f"{seconds.mean():.2f} s on average; {os.cpu_count()} cores\n")
+    print_table(ROWS, header=("what", "p50", "p99", "unit", "reference / budget"))
+    print()
+    print_rates(verdicts)
+
+
+def _rebuild_times(recognizer: Recognizer, words: list[str], lex: Lexicon) -> np.ndarray:
+    # alternate two word lists, so that every call compiles (an unchanged grammar is skipped)
+    lists = [words, words[:-1]]
+    t = np.empty(20)
+    for i in range(20):
+        start = time.perf_counter()
+        recognizer.set_grammar(build_grammar(lists[i % 2], lex))
+        t[i] = time.perf_counter() - start
+    return t
+
+
+def print_rates(verdicts) -> None:
+    """Recognition rates over the corpus, per voice, and the false accepts."""
+    print("| voice | in grammar recognised | out of grammar refused |")
+    print("|---|---|---|")
+    for voice in VOICES + ["all"]:
+        mine = [v for v in verdicts if voice in ("all", v[2])]
+        inside = [v for v in mine if v[1]]
+        outside = [v for v in mine if not v[1]]
+        ok_in = sum(v[4].heard is not None and v[4].heard.text == v[0] for v in inside)
+        ok_out = sum(v[4].heard is None for v in outside)
+        print(f"| {voice} | {ok_in}/{len(inside)} | {ok_out}/{len(outside)} |")
+    missed = [f"{v[0]!r} ({v[2]} {v[3]}): {v[4].reason}" for v in verdicts if v[1] and
+              (v[4].heard is None or v[4].heard.text != v[0])]
+    wrong = [f"{v[0]!r} ({v[2]} {v[3]}) -> {v[4].heard.text!r}" for v in verdicts if not v[1] and v[4].heard]
+    print(f"\nfalse accepts ({len(wrong)}):", "; ".join(wrong) or "none")
+    print(f"missed ({len(missed)}):")
+    for m in missed:
+        print("  ", m)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,473 @@
+// Switch scanning: one controller for every page, for people who use one or two switches (a big
+// button, a sip-and-puff, a head switch) that send a key or a mouse button.
+//
+// A ring moves over the page's controls; the person selects the one ringed. Patterns: row/column
+// (a row first, then a control in it), linear (control by control) and group (the page's regions:
+// Connection Manager, tabs, each panel, then its rows). The Emergency stop is always the first
+// thing ringed, on its own, so it is one select away whenever scanning starts or starts over.
+// Moves: step (the switch moves the ring) or automatic (a timer does). One switch: tap = next,
+// hold = select (AsTeRICS-Grid's scheme); in automatic scanning any press selects. Two switches:
+// next and select. After `rounds` rounds without a select, scanning stops and waits for a press.
+//
+// Controls that act while held (jog "Hold to move") take the 'scan:select' event: they start, and
+// the next press of any switch stops them (select-to-start, select-to-stop). When scanning is off
+// this module does nothing at all: no listener acts, no key is taken.
+import { onSettings, settings } from './settings.js';
+import { el } from './ui.js';
+
+const ACTIONABLE = 'button, a[href], input:not([type=hidden]), select, textarea, [contenteditable="true"], [role=button]';
+const MAX_GROUP = 8;          // a group with more controls than this is scanned row by row inside
+const TEXT_INPUTS = new Set(['text', 'number', 'search', 'email', 'url', 'tel', 'password']);
+export const MOUSE_BUTTONS = ['Left mouse button', 'Middle mouse button', 'Right mouse button', 'Back mouse button', 'Forward mouse button'];
+
+// --- what can be scanned -----------------------------------------------------------------------
+function usable(node) {
+  if (node.disabled || node.closest('[inert]')) return false;
+  if (!node.checkVisibility({ visibilityProperty: true })) return false;
+  const r = node.getBoundingClientRect();
+  // Off-page elements (the skip link waits at left: -999px) are for keyboards, not for switches.
+  return r.width > 0 && r.height > 0 && r.right + window.scrollX > 0 && r.bottom + window.scrollY > 0;
+}
+
+function controls(root) {
+  return [...root.querySelectorAll(ACTIONABLE)].filter((n) => n.id !== 'estop' && !n.closest('#scan-ring') && usable(n));
+}
+
+function nameOf(node) {
+  const label = node.getAttribute('aria-label') || (node.labels && node.labels[0] && node.labels[0].textContent)
+    || node.innerText || node.getAttribute('placeholder') || node.getAttribute('title') || node.tagName.toLowerCase();
+  let text = label.replace(/\s+/g, ' ').trim();
+  if (node.tagName === 'SELECT' && node.selectedOptions[0]) text = `${text}: ${node.selectedOptions[0].textContent.trim()}`;
+  return text.length > 48 ? `${text.slice(0, 47)}…` : text;
+}
+
+function regionName(node) {
+  const heading = node.querySelector('h2, h3');
+  return node.getAttribute('aria-label') || (heading && heading.textContent.trim()) || 'Controls';
+}
+
+// Consecutive controls (in reading order) whose boxes share a line make a row: the rows of a
+// two-column page stay in their column.
+function rowsOf(nodes) {
+  const rows = [];
+  let row = null;
+  for (const node of nodes) {
+    const r = node.getBoundingClientRect();
+    if (row && r.top < row.bottom - 2 && r.bottom > row.top + 2) {
+      row.nodes.push(node);
+      row.top = Math.min(row.top, r.top);
+      row.bottom = Math.max(row.bottom, r.bottom);
+    } else {
+      row = { nodes: [node], top: r.top, bottom: r.bottom };
+      rows.push(row);
+    }
+  }
+  return rows.map((x) => x.nodes);
+}
+
+// An entry is what the ring stands on: one control, or a row or group that a select opens.
+function item(node) { return { nodes: [node], label: nameOf(node) }; }
+
+function rowEntry(nodes) {
+  if (nodes.length === 1) return item(nodes[0]);
+  return { nodes, label: `Row: ${nodes.map(nameOf).join(', ')}`, open: () => nodes.filter((n) => n.isConnected && usable(n)).map(item) };
+}
+
+function groupEntry(nodes, box, label, collect) {
+  if (!nodes.length) return null;
+  if (nodes.length === 1) return item(nodes[0]);
+  return {
+    nodes, box, label: `${label} (${nodes.length})`,
+    open: () => { const now = collect(); return now.length > MAX_GROUP ? rowsOf(now).map(rowEntry) : now.map(item); },
+  };
+}
+
+// The page's regions for group scanning: the header's, then each top section of the view, then
+// whatever is left.
+function groups() {
+  const regions = ['#connection', '#tabs', '#wizard', '#notice'].map((s) => document.querySelector(s));
+  const view = document.getElementById('view');
+  regions.push(...[...view.querySelectorAll('section')].filter((s) => !s.parentElement.closest('#view section')));
+  const entries = [];
+  const placed = new Set();
+  for (const region of regions) {
+    if (!region) continue;
+    const collect = () => controls(region);
+    const nodes = collect();
+    nodes.forEach((n) => placed.add(n));
+    const name = region.id === 'tabs' ? 'Pages' : region.id === 'notice' ? 'Message' : regionName(region);
+    entries.push(groupEntry(nodes, region, name, collect));
+  }
+  const rest = () => controls(document.body).filter((n) => !placed.has(n));
+  entries.push(groupEntry(rest(), null, 'Other controls', rest));
+  return entries.filter(Boolean);
+}
+
+function topEntries() {
+  const estop = item(document.getElementById('estop'));
+  const pattern = settings().pattern;
+  if (pattern === 'group') return [estop, ...groups()];
+  const all = controls(document.body);
+  return [estop, ...(pattern === 'linear' ? all.map(item) : rowsOf(all).map(rowEntry))];
+}
+
+// --- the ring ----------------------------------------------------------------------------------
+const chip = el('span', { class: 'scan-chip' });
+const ring = el('div', { id: 'scan-ring', class: 'scan-ring', 'aria-hidden': 'true', hidden: true }, chip);
+
+function boxOf(entry) {
+  const rects = entry.box ? [entry.box.getBoundingClientRect()] : entry.nodes.map((n) => n.getBoundingClientRect());
+  const left = Math.min(...rects.map((r) => r.left)), top = Math.min(...rects.map((r) => r.top));
+  const right = Math.max(...rects.map((r) => r.right)), bottom = Math.max(...rects.map((r) => r.bottom));
+  return { left: left + window.scrollX, top: top + window.scrollY, width: right - left, height: bottom - top };
+}
+
+function place() {
+  if (!scan.entry) return;
+  if (!scan.entry.nodes.every((n) => n.isConnected)) refresh();   // the page re-drew those controls
+  if (!scan.entry) return;
+  const b = boxOf(scan.entry);
+  // Keep the ring (drawn up to 12 px outside the box) inside the page: no sideways scrolling.
+  const edge = 13, right = document.documentElement.clientWidth + window.scrollX - edge;
+  if (b.left < edge) { b.width -= edge - b.left; b.left = edge; }
+  if (b.left + b.width > right) b.width = right - b.left;
+  ring.classList.toggle('chip-right', b.left + b.width / 2 > window.scrollX + document.documentElement.clientWidth / 2);
+  Object.assign(ring.style, { left: `${b.left}px`, top: `${b.top}px`, width: `${b.width}px`, height: `${b.height}px` });
+  ring.classList.toggle('chip-below', b.top - window.scrollY < 40);
+}
+
+function loop() {
+  if (!scan.running) return;
+  place();
+  requestAnimationFrame(loop);
+}
+
+// --- sound: a short beep per move, a higher one per select (WebAudio, made at the first press) --
+let audio = null;
+function unlockAudio() {
+  if (!settings().sound) return;
+  if (!audio) audio = new AudioContext();
+  if (audio.state === 'suspended') audio.resume();
+}
+function beep(hz, ms) {
+  if (!settings().sound || !audio) return;
+  const t = audio.currentTime;
+  const osc = audio.createOscillator();
+  const gain = audio.createGain();
+  osc.frequency.value = hz;
+  gain.gain.setValueAtTime(0.2, t);
+  gain.gain.exponentialRampToValueAtTime(0.001, t + ms / 1000);
+  osc.connect(gain).connect(audio.destination);
+  osc.start(t);
+  osc.stop(t + ms / 1000);
+}
+
+// --- the controller ----------------------------------------------------------------------------
+const scan = {
+  running: false,
+  levels: [],       // [{ build() -> entries, index, steps }]: the top level and what was opened
+  entry: null,      // the entry ringed now
+  latched: null,    // stop() of a control started by a select, stopped by the next press
+  press: null,      // the switch press being held: { which, consumed, timer }
+  timer: null,      // automatic scanning's next move
+  suspended: 0,     // the Access page is listening for a new switch
+  steps: 0,         // moves of the ring, as data-step (a test or a person's tool can follow it)
+};
+
+function level() { return scan.levels[scan.levels.length - 1]; }
+
+function mark(entry) {
+  for (const n of document.querySelectorAll('[data-scanned]')) n.removeAttribute('data-scanned');
+  scan.entry = entry;
+  if (!entry) return;
+  for (const n of entry.nodes) n.setAttribute('data-scanned', '');
+  chip.textContent = scan.latched ? `${entry.label}: running. Press your switch to stop.` : entry.label;
+  place();
+}
+
+// Re-read the entries of the level (the page may have changed) and ring the one at its index.
+function refresh() {
+  let entries = level().build();
+  while (!entries.length && scan.levels.length > 1) { scan.levels.pop(); entries = level().build(); }
+  const lv = level();
+  lv.index = Math.min(lv.index, entries.length - 1);
+  mark(entries[lv.index]);
+  return entries;
+}
+
+function show() {
+  refresh();
+  const target = scan.entry && (scan.entry.box || scan.entry.nodes[0]);
+  if (target) target.scrollIntoView({ block: 'nearest', inline: 'nearest' });
+  scan.steps += 1;
+  ring.dataset.step = String(scan.steps);
+  ring.hidden = false;
+  beep(660, 60);
+  schedule();
+}
+
+function schedule() {
+  clearTimeout(scan.timer);
+  if (scan.running && !scan.latched && settings().mode === 'auto') scan.timer = setTimeout(next, settings().intervalMs);
+}
+
+function toTop() { scan.levels = [{ build: topEntries, index: 0, steps: 0 }]; }
+
+function start() {
+  toTop();
+  scan.running = true;
+  show();
+  status();
+  requestAnimationFrame(loop);
+}
+
+export function stop() {
+  if (scan.latched) {   // scanning turned off while a hold-to-move runs: it stops too
+    const stopIt = scan.latched;
+    scan.latched = null;
+    ring.classList.remove('latched');
+    stopIt();
+  }
+  scan.running = false;
+  clearTimeout(scan.timer);
+  mark(null);
+  ring.hidden = true;
+  status();
+}
+
+function next() {
+  const lv = level();
+  const n = level().build().length;
+  lv.index = (lv.index + 1) % Math.max(n, 1);
+  lv.steps += 1;
+  if (lv.steps >= settings().rounds * n) {
+    // Rounds without a select: a row or group closes; at the top, scanning waits for a press.
+    if (scan.levels.length > 1) toTop();
+    else { stop(); return; }
+  }
+  show();
+}
+
+function select() {
+  let entry = scan.entry;
+  // Open a row or group; one that holds a single row or control opens straight into it.
+  while (entry && entry.open) {
+    const inside = entry.open();
+    if (inside.length > 1) {
+      scan.levels.push({ build: entry.open, index: 0, steps: 0 });
+      beep(990, 60);
+      show();
+      return;
+    }
+    if (!inside.length) break;
+    entry = inside[0];
+  }
+  if (entry) activate(entry.nodes[0]);
+}
+
+function afterSelect() {
+  if (settings().afterSelect === 'start') toTop();
+  else level().steps = 0;
+  show();
+  status();
+}
+
+function latch(stopIt) {
+  scan.latched = stopIt;
+  clearTimeout(scan.timer);
+  ring.classList.add('latched');
+  mark(scan.entry);
+  status();
+  return () => {
+    if (scan.latched !== stopIt) return;
+    scan.latched = null;
+    ring.classList.remove('latched');
+    if (scan.running) afterSelect();
+  };
+}
+
+function activate(node) {
+  beep(990, 90);
+  const asked = new CustomEvent('scan:select', { cancelable: true, detail: { latch } });
+  if (!node.dispatchEvent(asked)) {
+    if (!scan.latched && scan.running) afterSelect();    // the control acted and did not latch
+    return;
+  }
+  if (node.tagName === 'SELECT') {
+    // A drop-down list cannot be opened by a script: each select picks the next choice.
+    node.selectedIndex = (node.selectedIndex + 1) % node.options.length;
+    node.dispatchEvent(new Event('input', { bubbles: true }));
+    node.dispatchEvent(new Event('change', { bubbles: true }));
+  } else if (node.tagName === 'TEXTAREA' || node.isContentEditable || (node.tagName === 'INPUT' && TEXT_INPUTS.has(node.type))) {
+    node.focus();    // typing needs a keyboard (the system's on-screen one types here)
+  } else {
+    node.focus({ preventScroll: true });
+    node.click();
+  }
+  if (scan.running) afterSelect();    // the select may have turned scanning off
+}
+
+// --- switch presses ----------------------------------------------------------------------------
+function onDown(which) {
+  if (scan.press) return;    // one press at a time
+  const press = { which, consumed: true, timer: null };
+  scan.press = press;
+  unlockAudio();
+  if (scan.latched) {
+    const stopIt = scan.latched;
+    scan.latched = null;
+    ring.classList.remove('latched');
+    stopIt();
+    if (scan.running) afterSelect();
+    return;
+  }
+  if (!scan.running) { start(); return; }
+  const s = settings();
+  if (s.switches === 2) { if (which === 'next') next(); else select(); return; }
+  if (s.mode === 'auto') { select(); return; }
+  press.consumed = false;
+  press.timer = setTimeout(() => { press.consumed = true; select(); }, s.holdMs);
+}
+
+function onUp(which) {
+  const press = scan.press;
+  if (!press || press.which !== which) return;
+  clearTimeout(press.timer);
+  scan.press = null;
+  if (!press.consumed) next();
+}
+
+function forgetPress() {
+  if (scan.press) { clearTimeout(scan.press.timer); scan.press = null; }
+}
+
+function on() { return settings().enabled && !scan.suspended; }
+
+function keyWhich(e) {
+  if (e.ctrlKey || e.altKey || e.metaKey) return null;
+  const s = settings();
+  const code = e.code || e.key;
+  if (s.next.kind === 'key' && s.next.code === code) return 'next';
+  if (s.switches === 2 && s.select.kind === 'key' && s.select.code === code) return 'select';
+  return null;
+}
+
+function buttonWhich(button) {
+  const s = settings();
+  if (s.next.kind === 'mouse' && s.next.button === button) return 'next';
+  if (s.switches === 2 && s.select.kind === 'mouse' && s.select.button === button) return 'select';
+  return null;
+}
+
+function swallow(e) { e.preventDefault(); e.stopImmediatePropagation(); }
+
+// Capturing listeners on window run before any of the page's, so a switch press never also
+// clicks, types or starts a hold-to-move.
+function listen() {
+  window.addEventListener('keydown', (e) => {
+    const which = on() && keyWhich(e);
+    if (!which) return;
+    swallow(e);
+    if (!e.repeat) onDown(which);
+  }, true);
+  window.addEventListener('keyup', (e) => {
+    const which = on() && keyWhich(e);
+    if (!which) return;
+    swallow(e);
+    onUp(which);
+  }, true);
+  window.addEventListener('pointerdown', (e) => {
+    const which = on() && e.pointerType === 'mouse' && buttonWhich(e.button);
+    if (!which) return;
+    swallow(e);
+    onDown(which);
+  }, true);
+  window.addEventListener('pointerup', (e) => {
+    const which = on() && e.pointerType === 'mouse' && buttonWhich(e.button);
+    if (!which) return;
+    swallow(e);
+    onUp(which);
+  }, true);
+  // The mouse events that follow a switch's button press must not click what is under the pointer.
+  for (const type of ['mousedown', 'mouseup', 'click', 'auxclick', 'contextmenu']) {
+    window.addEventListener(type, (e) => {
+      const touch = e.sourceCapabilities && e.sourceCapabilities.firesTouchEvents;
+      if (e.isTrusted && !touch && on() && buttonWhich(e.button)) swallow(e);
+    }, true);
+  }
+  // A press whose release the page never sees (the window lost focus) is forgotten, not a tap.
+  window.addEventListener('blur', forgetPress);
+}
+
+// --- "press your switch now" -------------------------------------------------------------------
+function keyLabel(e) {
+  if (e.key === ' ') return 'Space';
+  return e.key.length === 1 ? e.key.toUpperCase() : e.key;
+}
+
+// Take the next key or mouse button pressed as a switch. A press on `cancel` (any pointer)
+// cancels. Resolves with the switch, or null when cancelled; `stopListening()` ends it early.
+export function captureSwitch(cancel) {
+  let done;
+  const result = new Promise((resolve) => { done = resolve; });
+  forgetPress();
+  scan.suspended += 1;
+  let finished = false;
+  const finish = (value) => {
+    if (finished) return;
+    finished = true;
+    window.removeEventListener('keydown', onKey, true);
+    window.removeEventListener('pointerdown', onPointer, true);
+    window.removeEventListener('contextmenu', swallow, true);
+    scan.suspended -= 1;
+    done(value);
+  };
+  const onKey = (e) => {
+    if (e.repeat) return;
+    const code = e.code || e.key;
+    if (e.key === 'Escape' || !/^[A-Za-z0-9]{1,40}$/.test(code)) return;   // Esc stays the emergency stop
+    swallow(e);
+    finish({ kind: 'key', code, label: keyLabel(e) });
+  };
+  const onPointer = (e) => {
+    if (cancel.contains(e.target)) { swallow(e); finish(null); return; }
+    if (e.pointerType !== 'mouse' || e.button > 4) return;
+    swallow(e);
+    finish({ kind: 'mouse', button: e.button, label: MOUSE_BUTTONS[e.button] });
+  };
+  window.addEventListener('keydown', onKey, true);
+  window.addEventListener('pointerdown', onPointer, true);
+  window.addEventListener('contextmenu', swallow, true);
+  return { result, stopListening: () => finish(null) };
+}
+
+// --- status line and start-up ------------------------------------------------------------------
+export function describe(s = settings()) {
+  if (s.switches === 2) return `${s.next.label} moves on, ${s.select.label} selects`;
+  return s.mode === 'auto' ? `press ${s.next.label} to select` : `tap ${s.next.label} to move on, hold it to select`;
+}
+
+function status() {
+  const line = document.getElementById('scan-state');
+  const s = settings();
+  line.hidden = !s.enabled;
+  if (!s.enabled) return;
+  if (scan.latched) line.textContent = 'Switch scanning: running. Press your switch to stop it.';
+  else if (scan.running) line.textContent = `Switch scanning: ${describe(s)}.`;
+  else line.textContent = `Switch scanning is on: press ${s.next.label} to start.`;
+}
+
+export function startScanning() {
+  document.body.append(ring);
+  listen();
+  let pattern = settings().pattern;
+  onSettings((s) => {
+    forgetPress();    // a press begun under the old settings (its release may be another key now)
+    if (!s.enabled) stop();
+    else if (scan.running && s.pattern !== pattern) { toTop(); show(); }
+    else schedule();
+    pattern = s.pattern;
+    status();
+  });
+  status();
+}

@@ -1,0 +1,572 @@
+"""Access in a real browser: switch scanning (one switch, Space alone) and WCAG 2.2 AA.
+
+Against the kitchen simulation (and the apartment for the Pioneer page), with Debian's chromium:
+axe-core on every view, a task launched from the Launcher by step and by automatic scanning, the
+Emergency stop with one switch, a hold-to-move jog started and stopped by select, the settings
+kept, exported and imported, 44 px targets, keyboard-only Tab with a visible focus, messages that
+stay while pointed at, and the 3D view's Pause.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+import urllib.request
+
+import pytest
+
+from asibot.testing import wait_until
+
+from .conftest import ROOT, screenshot
+from .test_browser import ArmWatch
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
+
+ROBOT = "asibot-sim"
+AXE = ROOT / "services" / "web" / "frontend" / "node_modules" / "axe-core" / "axe.min.js"
+WCAG = ["wcag2a", "wcag2aa", "wcag21a", "wcag21aa", "wcag22aa"]
+TASK, PROGRAM, MARK = "Scan wave", "scan_wave", "waved by one switch"
+ESTOP = "Emergency stop Esc"
+SETTINGS_FORMAT = {"format": "asibot-access-settings", "version": 1}
+
+# What each view shows once it has loaded what it lists.
+READY = {
+    "home": "text=Teach the robot a task", "joint": ".jog-grid button", "cartesian": ".jog-grid button",
+    "program": ".cm-content", "speech": ".points li", "assigner": ".icons button", "launcher": ".task-button",
+    "video": ".video img, .video p", "access": "#access-intervalMs", "pioneer": ".jog-grid button",
+}
+KITCHEN_VIEWS = [v for v in READY if v != "pioneer"]
+
+
+def http(stack, method: str, path: str, body: dict | None = None) -> dict:
+    data = None if body is None else json.dumps(body).encode()
+    request = urllib.request.Request(stack.web_url + path, data=data, method=method,
+                                     headers={"Content-Type": "application/json"})
+    with urllib.request.urlopen(request, timeout=10) as reply:
+        return json.loads(reply.read() or b"{}")
+
+
+@pytest.fixture(scope="module")
+def task(kitchen):
+    """A program and the Launcher task that runs it, made through the HTTP API."""
+    http(kitchen, "POST", "api/programs", {"name": PROGRAM})
+    http(kitchen, "PUT", f"api/programs/{PROGRAM}", {"text": f"print({MARK!r}, flush=True)\n"})
+    http(kitchen, "PUT", "api/tasks/Scan%20wave", {"program": PROGRAM, "words": [], "icon": "can.svg"})
+    return TASK
+
+
+@pytest.fixture
+def arm(kitchen):
+    watch = ArmWatch(kitchen.bus)
+    yield watch
+    watch.close()
+
+
+@pytest.fixture
+def released(kitchen):
+    """The arm's emergency stop is released after the test, whatever it did."""
+    yield
+    http(kitchen, "POST", f"api/robots/{ROBOT}/release")
+
+
+def go(page, view: str) -> None:
+    page.evaluate("(v) => { location.hash = v; }", view)
+    page.wait_for_selector(READY[view], timeout=15000)
+
+
+def with_settings(page, view: str, **settings) -> None:
+    """Load `view` with these access settings in the browser's storage (as an imported file does)."""
+    page.evaluate("(s) => localStorage.setItem('asibot.access', JSON.stringify(s))", {**SETTINGS_FORMAT, **settings})
+    page.goto(page.url.split("#")[0] + "#" + view)
+    page.reload()
+    page.wait_for_selector("body[data-ready=true]")
+    page.wait_for_selector(f".robot-card[data-robot={ROBOT}]", timeout=15000)
+    page.wait_for_selector(READY[view], timeout=15000)
+
+
+# --- scanning from the test's side: Space, and what the ring is on ---------------------------
+RINGED = """() => [...document.querySelectorAll('[data-scanned]')]
+    .map((n) => (n.getAttribute('aria-label') || n.innerText).replace(/\\s+/g, ' ').trim())"""
+
+
+def ringed(page) -> list[str]:
+    return page.evaluate(RINGED)
+
+
+def moves(page) -> str:
+    return page.evaluate("document.getElementById('scan-ring').dataset.step || '0'")
+
+
+def tap(page) -> None:
+    """A short press of Space: the ring moves on (or scanning starts)."""
+    before = moves(page)
+    page.keyboard.press("Space")
+    page.wait_for_function("(s) => document.getElementById('scan-ring').dataset.step !== s", arg=before, timeout=5000)
+
+
+def hold(page) -> None:
+    """Space held until the page selects (400 ms by default), then let go."""
+    before = moves(page)
+    page.keyboard.down("Space")
+    page.wait_for_function("""(s) => { const r = document.getElementById('scan-ring');
+        return r.dataset.step !== s || r.classList.contains('latched'); }""", arg=before, timeout=5000)
+    page.keyboard.up("Space")
+
+
+def tap_until(page, wanted, limit: int = 80) -> list[str]:
+    for _ in range(limit):
+        now = ringed(page)
+        if wanted(now):
+            return now
+        tap(page)
+    raise AssertionError(f"the ring never got there; it is on {ringed(page)}")
+
+
+def choose(page, name: str) -> None:
+    """Step scanning with one switch: tap to the row holding `name`, hold, tap to it, hold."""
+    now = tap_until(page, lambda r: name in r)
+    if len(now) > 1:
+        hold(page)
+        tap_until(page, lambda r: r == [name])
+    hold(page)
+
+
+def wait_ringed(page, js_test: str, timeout: float = 30000) -> None:
+    page.wait_for_function(f"() => ({js_test})(({RINGED})())", timeout=timeout)
+
+
+def last_run(kitchen) -> dict:
+    return http(kitchen, "GET", "api/run")
+
+
+def ran_the_task(kitchen) -> bool:
+    run = last_run(kitchen)
+    return not run["running"] and run["last"] is not None and any(MARK in line for _, line in run["output"])
+
+
+# --- WCAG 2.2 AA: axe-core on every view ------------------------------------------------------
+def axe(page) -> list[str]:
+    if not page.evaluate("!!window.axe"):
+        page.add_script_tag(path=str(AXE))
+    result = page.evaluate("(tags) => axe.run(document, { runOnly: { type: 'tag', values: tags } })", WCAG)
+    return [f"{v['id']}: {v['help']} at {[n['target'] for n in v['nodes']]}" for v in result["violations"]]
+
+
+@pytest.mark.parametrize("view", KITCHEN_VIEWS)
+def test_axe_finds_no_wcag_violation(page, task, view):
+    go(page, view)
+    assert axe(page) == []
+
+
+def test_axe_with_the_wizard_a_message_a_stop_and_the_scanning_ring(page, task, released):
+    page.get_by_role("button", name="Start the Task Creator wizard").click()
+    page.keyboard.press("Escape")                                        # the emergency stop: a notice, a lamp, a Release button
+    page.locator(".robot-card").get_by_text("STOPPED").wait_for(timeout=10000)
+    page.locator("#notice").wait_for(state="visible")
+    assert axe(page) == []
+    with_settings(page, "launcher", enabled=True)
+    tap(page)
+    tap(page)
+    assert axe(page) == []
+
+
+# --- one switch: the Launcher, the Emergency stop, hold-to-move --------------------------------
+def test_a_task_launched_with_space_alone_in_step_scanning(page, kitchen, task):
+    with_settings(page, "home", enabled=True)                          # step, row/column, one switch: Space
+    tap(page)
+    assert ringed(page) == [ESTOP], "scanning starts on the Emergency stop"
+    choose(page, "Launcher")                                           # the tab, by scanning
+    page.wait_for_selector(READY["launcher"])
+    assert ringed(page) == [ESTOP], "after a select the ring starts again at the Emergency stop"
+    screenshot(page, "scan-step-estop-first")
+    tap_until(page, lambda r: f"Launch {TASK}" in r)
+    screenshot(page, "scan-step-launcher-row")
+    choose(page, f"Launch {TASK}")
+    wait_until(lambda: ran_the_task(kitchen), timeout=30, message="the task did not run")
+    assert last_run(kitchen)["last"]["program"] == TASK
+
+
+def test_a_task_launched_with_space_alone_in_automatic_scanning(page, kitchen, task):
+    with_settings(page, "home", enabled=True, mode="auto", intervalMs=800)
+    page.keyboard.press("Space")                                       # start: the ring moves by itself
+    wait_ringed(page, "(r) => r.includes('Launcher') && r.length > 1")
+    page.keyboard.press("Space")                                       # in automatic scanning a press selects
+    wait_ringed(page, "(r) => r.length === 1 && r[0] === 'Launcher'")
+    page.keyboard.press("Space")
+    page.wait_for_selector(READY["launcher"])
+    wait_ringed(page, f"(r) => r.includes('Launch {TASK}')")
+    if len(ringed(page)) > 1:
+        page.keyboard.press("Space")
+        wait_ringed(page, f"(r) => r.length === 1 && r[0] === 'Launch {TASK}'")
+    page.keyboard.press("Space")
+    wait_until(lambda: ran_the_task(kitchen), timeout=30, message="the task did not run")
+    assert last_run(kitchen)["last"]["program"] == TASK
+
+
+def estop_engaged(kitchen) -> bool:
+    return http(kitchen, "GET", f"api/robots/{ROBOT}")["estop"]["engaged"]
+
+
+@pytest.mark.parametrize("pattern,mode", [("rowcol", "step"), ("linear", "step"), ("group", "step"), ("group", "auto")])
+def test_the_emergency_stop_with_one_switch(page, kitchen, released, pattern, mode):
+    with_settings(page, "joint", enabled=True, pattern=pattern, mode=mode, intervalMs=1500)
+    assert not estop_engaged(kitchen)
+    page.keyboard.press("Space")                                       # first press: the ring is on the stop
+    wait_ringed(page, f"(r) => r.length === 1 && r[0] === '{ESTOP}'")
+    if mode == "step":
+        hold(page)
+    else:
+        page.keyboard.press("Space")
+    wait_until(lambda: estop_engaged(kitchen), timeout=5, message="the emergency stop was not pressed")
+
+
+def test_after_any_select_the_emergency_stop_is_one_step_away(page, kitchen, released):
+    with_settings(page, "home", enabled=True, pattern="group")
+    tap(page)
+    choose(page, "Joint")                                              # into the Pages group, to the Joint tab
+    page.wait_for_selector(READY["joint"])
+    assert ringed(page) == [ESTOP]
+    hold(page)
+    wait_until(lambda: estop_engaged(kitchen), timeout=5)
+    tap_until(page, lambda r: "Joint 1 plus" in r)                    # the view's jogging panel, a group
+    screenshot(page, "scan-group-joint")
+
+
+@pytest.mark.parametrize("stop_by", ["switch", "window blur"])
+def test_hold_to_move_is_select_to_start_select_to_stop_while_scanning(page, arm, stop_by):
+    with_settings(page, "joint", enabled=True)
+    page.get_by_role("button", name="Hold to move").click()           # a mouse still works beside the switch
+    q0 = arm.joints()
+    name = f"Joint 1 {'minus' if q0[0] > 0 else 'plus'}"
+    tap(page)
+    choose(page, name)
+    page.wait_for_selector("#scan-ring.latched")
+    assert page.get_by_role("button", name=name).get_attribute("class") == "active"
+    wait_until(lambda: abs(arm.joints()[0] - q0[0]) > math.radians(2.0), timeout=10, message="the arm did not move")
+    screenshot(page, f"scan-jog-running-{stop_by.replace(' ', '-')}")
+    assert arm.moving()
+    assert "running" in page.locator(".scan-chip").inner_text()
+    stopped = time.monotonic()
+    if stop_by == "switch":
+        tap(page)                                                      # the next press stops it
+    else:
+        page.evaluate("window.dispatchEvent(new Event('blur'))")      # the old safety stops still apply
+    arm.stopped_at(stopped)
+    page.wait_for_selector("#scan-ring:not(.latched)")
+    assert ringed(page) == [ESTOP]
+    still_since, q1 = time.monotonic(), arm.joints()
+    wait_until(lambda: arm.samples[-1][0] > still_since + 0.5, timeout=5)   # half a second more of states
+    assert arm.joints() == pytest.approx(q1, abs=1e-4), "the arm kept moving"
+
+
+# --- settings: kept, exported, imported, refused -------------------------------------------------
+def stored(page) -> dict:
+    return json.loads(page.evaluate("localStorage.getItem('asibot.access') || '{}'"))
+
+
+def pressed(page, group: str) -> str:
+    return page.get_by_role("group", name=group).locator("button[aria-pressed=true]").inner_text()
+
+
+def test_settings_survive_a_reload(page):
+    go(page, "access")
+    page.get_by_role("group", name="Switch scanning").get_by_role("button", name="On").click()
+    page.get_by_role("button", name="Automatic: it moves by itself").click()
+    page.get_by_role("button", name="Groups").click()
+    page.get_by_role("button", name="Two switches: next and select").click()
+    page.locator("#access-intervalMs").fill("1500")
+    page.locator("#access-intervalMs").press("Tab")
+    page.get_by_role("button", name="More: Rounds before scanning stops").click()
+    page.get_by_role("button", name="Change switch: Select switch").click()
+    page.locator(".capture-prompt:visible").wait_for()
+    page.get_by_role("heading", name="Messages").click(button="right")    # the right mouse button is the switch
+    page.get_by_text("Your select switch is now Right mouse button.").wait_for()
+    page.reload()
+    page.wait_for_selector("body[data-ready=true]")
+    page.wait_for_selector(READY["access"])
+    assert pressed(page, "Switch scanning") == "On"
+    assert pressed(page, "How the ring moves") == "Automatic: it moves by itself"
+    assert pressed(page, "Order") == "Groups"
+    assert page.locator("#access-intervalMs").input_value() == "1500"
+    assert page.locator("#access-rounds").input_value() == "4"
+    assert page.locator(".switch-name").nth(1).inner_text() == "Right mouse button"
+    assert page.locator("#scan-state").inner_text() == "Switch scanning is on: press Space to start."
+    s = stored(page)
+    assert (s["mode"], s["pattern"], s["switches"], s["intervalMs"], s["rounds"]) == ("auto", "group", 2, 1500, 4)
+    assert s["select"] == {"kind": "mouse", "button": 2, "label": "Right mouse button"}
+
+
+def test_settings_export_and_import_round_trip(page, tmp_path):
+    with_settings(page, "access", enabled=False, pattern="linear", intervalMs=2300, holdMs=700, sound=True,
+                  next={"kind": "key", "code": "F8", "label": "F8"}, messages="stay")
+    with page.expect_download() as download:
+        page.get_by_role("button", name="Export settings").click()
+    exported = tmp_path / "settings.json"
+    download.value.save_as(exported)
+    assert download.value.suggested_filename == "asibot-access-settings.json"
+    data = json.loads(exported.read_text())
+    assert (data["format"], data["version"], data["pattern"], data["intervalMs"], data["holdMs"]) == ("asibot-access-settings", 1, "linear", 2300, 700)
+    assert data["next"] == {"kind": "key", "code": "F8", "label": "F8"} and data["sound"] is True and data["messages"] == "stay"
+    page.get_by_role("button", name="Back to the defaults").click()
+    page.get_by_role("button", name="Sure? Touch again").click()
+    page.locator("#notice").get_by_text("Access settings are back to the defaults.").wait_for()
+    assert stored(page)["intervalMs"] == 1000 and stored(page)["pattern"] == "rowcol"
+    page.get_by_label("Import settings").set_input_files(exported)
+    page.locator("#notice").get_by_text("Settings imported from settings.json.").wait_for()
+    assert stored(page) == {k: v for k, v in data.items() if k not in ("format", "version")}
+    assert page.locator("#access-intervalMs").input_value() == "2300"
+    assert pressed(page, "Order") == "One by one"
+    assert page.locator(".switch-name").first.inner_text() == "F8"
+
+
+@pytest.mark.parametrize("content,sentence", [
+    (b"not json at all", "That file is not a settings file (it is not JSON). Nothing was changed."),
+    (b'{"format": "asibot-access-settings", "version": 1, "intervalMs": 50}',
+     "That settings file was refused: the scanning time (ms) must be a whole number from 100 to 10000 in steps of 100. Nothing was changed."),
+    (b'{"format": "asibot-access-settings", "version": 1, "next": {"kind": "key", "code": "Escape", "label": "Esc"}}',
+     "That settings file was refused: Esc is the emergency stop key; it cannot be a switch. Nothing was changed."),
+    (b'{"format": "asibot-access-settings", "version": 1, "speed": 3}',
+     'That settings file was refused: it has a setting this page does not know: "speed". Nothing was changed.'),
+    (b'{"pattern": "linear"}', "That file is not an ASIBOT access settings file. Nothing was changed."),
+])
+def test_a_bad_settings_file_is_refused_with_a_sentence(page, content, sentence):
+    with_settings(page, "access", intervalMs=1200)
+    before = stored(page)
+    page.get_by_label("Import settings").set_input_files({"name": "bad.json", "mimeType": "application/json", "buffer": content})
+    notice = page.locator("#notice")
+    notice.get_by_text(sentence).wait_for()
+    assert notice.get_attribute("role") == "alert"
+    assert stored(page) == before
+    assert page.locator("#access-intervalMs").input_value() == "1200"
+
+
+def test_any_key_or_mouse_button_can_be_the_switch(page):
+    go(page, "access")
+    page.get_by_role("button", name="Change switch: Your switch").click()
+    page.locator(".capture-prompt:visible").wait_for()
+    page.keyboard.press("F2")
+    page.get_by_text("Your switch is now F2.").wait_for()
+    page.get_by_role("group", name="Switch scanning").get_by_role("button", name="On").click()
+    page.keyboard.press("F2")
+    page.wait_for_function("document.getElementById('scan-ring').dataset.step === '1'")
+    page.keyboard.press("Space")                                       # not the switch any more: nothing moves
+    assert moves(page) == "1"
+    page.get_by_role("button", name="Change switch: Your switch").click()   # the mouse: not a switch yet
+    page.locator(".capture-prompt:visible").wait_for()
+    page.mouse.click(5, 600, button="middle")
+    page.get_by_text("Your switch is now Middle mouse button.").wait_for()
+    before = int(moves(page))
+    page.get_by_role("heading", name="Switch scanning").click(button="middle")
+    page.wait_for_function("(s) => Number(document.getElementById('scan-ring').dataset.step) > s", arg=before)
+    s = stored(page)
+    assert s["next"] == {"kind": "mouse", "button": 1, "label": "Middle mouse button"}
+
+
+def test_the_audible_cue_beeps_at_each_step(page):
+    page.context.add_init_script("""(() => {
+        window.beeps = 0;
+        const make = AudioContext.prototype.createOscillator;
+        AudioContext.prototype.createOscillator = function () { window.beeps += 1; return make.call(this); };
+    })()""")
+    with_settings(page, "home", enabled=True, sound=True)
+    tap(page)
+    tap(page)
+    tap(page)
+    assert page.evaluate("window.beeps") >= 3
+
+
+def test_the_ring_stands_out_at_least_3_to_1(page):
+    """The ring's colours against the page background and the background around the control."""
+    with_settings(page, "home", enabled=True, pattern="linear")
+    seen = []
+    for _ in range(14):                                                 # the stop, the top bar, the tabs, the page
+        tap(page)
+        seen.append(page.evaluate("""() => {
+            const ring = getComputedStyle(document.getElementById('scan-ring'));
+            const node = document.querySelector('[data-scanned]');
+            let around = node.parentElement;
+            while (around && getComputedStyle(around).backgroundColor === 'rgba(0, 0, 0, 0)') around = around.parentElement;
+            const shadow = ring.boxShadow.match(/rgba?\\([^)]*\\)/g);
+            return { outline: ring.outlineColor, shadow, around: getComputedStyle(around || document.body).backgroundColor,
+                     page: getComputedStyle(document.body).backgroundColor, name: node.innerText };
+        }"""))
+    screenshot(page, "scan-linear-home")
+    for s in seen:
+        colours = {s["outline"], *s["shadow"]}
+        for background in (s["around"], s["page"]):
+            assert max(contrast(c, background) for c in colours) >= 3, (s["name"], background)
+        assert contrast(s["shadow"][0], s["shadow"][1]) >= 3, "the ring's band against its lines"
+
+
+def _rgb(css: str) -> tuple[float, ...]:
+    return tuple(float(x) for x in css[css.index("(") + 1:css.index(")")].split(",")[:3])
+
+
+def contrast(a: str, b: str) -> float:
+    def lum(c):
+        def ch(v):
+            v /= 255
+            return v / 12.92 if v <= 0.03928 else ((v + 0.055) / 1.055) ** 2.4
+        r, g, b_ = (ch(v) for v in _rgb(c))
+        return 0.2126 * r + 0.7152 * g + 0.0722 * b_
+    hi, lo = sorted((lum(a), lum(b)), reverse=True)
+    return (hi + 0.05) / (lo + 0.05)
+
+
+def test_scanning_off_the_switch_key_does_nothing(page):
+    """Scanning off: Space is Space (no ring, the page as before)."""
+    go(page, "access")
+    page.get_by_role("button", name="Groups").focus()
+    page.keyboard.press("Space")                                       # activates the focused button, as always
+    assert pressed(page, "Order") == "Groups"
+    assert page.locator("#scan-ring").is_hidden()
+
+
+# --- WCAG: targets, keyboard, focus, time limits, motion -----------------------------------------
+def test_launcher_and_jog_buttons_are_at_least_44_px(page, task):
+    go(page, "launcher")
+    boxes = [b.bounding_box() for b in page.locator(".task-button").all()]
+    go(page, "joint")
+    page.wait_for_function("document.querySelectorAll('.jog-grid button').length >= 10")
+    boxes += [b.bounding_box() for b in page.locator(".jog-grid button").all()]
+    go(page, "cartesian")
+    boxes += [b.bounding_box() for b in page.locator(".jog-grid button:visible, .viewer-bar button:visible").all()]
+    go(page, "access")
+    boxes += [b.bounding_box() for b in page.locator("#view button:visible").all()]
+    assert len(boxes) > 30
+    small = [b for b in boxes if b["width"] < 44 or b["height"] < 44]
+    assert not small, small
+
+
+FOCUS_JS = """() => {
+    const n = document.activeElement;
+    const styled = [n, n.closest('.cm-editor')].filter(Boolean).map((x) => getComputedStyle(x));
+    const visible = styled.some((s) => (s.outlineStyle !== 'none' && parseFloat(s.outlineWidth) >= 2) || s.boxShadow !== 'none');
+    return { id: n.dataset.ctl || null, visible, name: (n.getAttribute('aria-label') || n.innerText || n.tagName).slice(0, 40) };
+}"""
+
+
+@pytest.mark.parametrize("view", KITCHEN_VIEWS)
+def test_tab_alone_reaches_every_control_with_a_visible_focus(page, task, view):
+    go(page, view)
+    wanted = page.evaluate("""() => {
+        const all = [...document.querySelectorAll('#view button, #view a[href], #view input, #view select, #view textarea, #view [contenteditable=true], #estop, #connection button, #tabs [aria-selected=true]')]
+            .filter((n) => !n.disabled && n.checkVisibility());
+        all.forEach((n, i) => { n.dataset.ctl = String(i); });
+        return all.length;
+    }""")
+    page.evaluate("document.activeElement.blur()")
+    reached, hidden_focus = set(), []
+    for _ in range(wanted + 20):
+        page.keyboard.press("Tab")
+        f = page.evaluate(FOCUS_JS)
+        if f["id"] is not None:
+            reached.add(int(f["id"]))
+            if not f["visible"]:
+                hidden_focus.append(f["name"])
+        if len(reached) == wanted:
+            break
+    missed = page.evaluate("(r) => [...document.querySelectorAll('[data-ctl]')].filter((n) => !r.includes(Number(n.dataset.ctl))).map((n) => n.getAttribute('aria-label') || n.innerText)", sorted(reached))
+    assert not missed, f"Tab never reached {missed}"
+    assert not hidden_focus, f"no visible focus on {hidden_focus}"
+
+
+def test_arrow_keys_reach_every_tab(page):
+    page.get_by_role("tab", name="Home").focus()
+    names = []
+    for _ in range(10):
+        page.keyboard.press("ArrowRight")
+        names.append(page.evaluate("document.activeElement.innerText"))
+    assert names[-1] == "Home" and "Access" in names and len(set(names)) == 10
+
+
+def test_good_news_stays_while_pointed_at_or_when_kept(page):
+    go(page, "speech")
+    notice = page.locator("#notice")
+    page.get_by_label("Word or phrase").fill("stay a while")
+    page.get_by_role("button", name="Record word").click()
+    notice.get_by_text('"stay a while" recorded.').wait_for()
+    notice.hover()
+    page.wait_for_timeout(5000)                                        # longer than the 4 s fade
+    assert notice.is_visible(), "the message went while the pointer was on it"
+    page.mouse.move(5, 880)
+    notice.wait_for(state="hidden", timeout=10000)                     # let go: it fades
+
+    with_settings(page, "speech", messages="stay")
+    page.get_by_label("Word or phrase").fill("stay for good")
+    page.get_by_role("button", name="Record word").click()
+    notice.get_by_text('"stay for good" recorded.').wait_for()
+    page.mouse.move(5, 880)
+    page.wait_for_timeout(5000)
+    assert notice.is_visible(), "a kept message went by itself"
+    notice.get_by_role("button", name="Dismiss").click()
+    assert notice.is_hidden()
+
+
+CANVAS_SUM = """() => {
+    const c = document.querySelector('.viewer canvas');
+    const g = document.createElement('canvas'); g.width = c.width; g.height = c.height;
+    const x = g.getContext('2d'); x.drawImage(c, 0, 0);
+    const d = x.getImageData(0, 0, g.width, g.height).data; let s = 0;
+    for (let i = 0; i < d.length; i += 4) s = (s * 31 + d[i] + 7 * d[i + 1] + 13 * d[i + 2]) % 1000000007;
+    return s; }"""
+
+
+def frames(page, n: int = 3) -> None:
+    page.evaluate("(n) => new Promise((done) => { const f = (k) => (k ? requestAnimationFrame(() => f(k - 1)) : done()); f(n); })", n)
+
+
+def test_the_3d_view_can_be_paused(page, kitchen, arm):
+    go(page, "joint")
+    page.wait_for_function("document.querySelector('.viewer canvas').width > 0")
+    wait_until(lambda: arm.joints() and not arm.moving(), timeout=30)
+    pause = page.locator(".viewer-bar").get_by_role("button", name="Pause")
+    pause.click()
+    assert pause.get_attribute("aria-pressed") == "true"
+    assert "Paused" in page.locator(".viewer-box .legend").inner_text()
+    frames(page)
+    frozen = page.evaluate(CANVAS_SUM)
+    readout = page.locator(".jog-grid .value").first
+    before = readout.inner_text()
+    q0 = arm.joints()
+    http(kitchen, "POST", f"api/robots/{ROBOT}/step", {"space": "joint", "axis": 0, "direction": -1 if q0[0] > 0 else 1, "level": 5})
+    wait_until(lambda: readout.inner_text() != before, timeout=10, message="the arm did not step")
+    arm.stopped_at(time.monotonic() - 0.1, timeout=20)
+    frames(page)                                                       # frames that would have drawn it
+    assert page.evaluate(CANVAS_SUM) == frozen, "the paused picture moved"
+    pause.click()
+    page.wait_for_function(f"() => ({CANVAS_SUM})() !== {frozen}", timeout=10000)
+    page.locator(".viewer-bar").get_by_role("button", name="Turn left").click()
+
+
+def test_a_confirm_button_waits_as_long_as_it_takes(page):
+    """The Delete of a point stays armed (no 4 s limit) until the person presses something else."""
+    go(page, "joint")
+    page.get_by_label("Name of the next point").fill("keep-me")
+    page.get_by_role("button", name="Capture point").click()
+    delete = page.get_by_role("button", name="Delete keep-me")
+    delete.click()
+    armed = page.get_by_role("button", name="Sure? Touch again: Delete keep-me")
+    page.wait_for_timeout(4500)
+    assert armed.is_visible()
+    page.get_by_role("heading", name="Points").click()                 # something else: it disarms
+    delete.wait_for()
+    delete.click()
+    armed.click()
+    page.get_by_text("keep-me deleted.").wait_for()
+
+
+# Last: the apartment (a second simulation) starts only for this test, after all of the kitchen's.
+def test_axe_on_the_pioneer_page(browser, apartment):
+    context = browser.new_context(viewport={"width": 1366, "height": 900})
+    page = context.new_page()
+    try:
+        page.goto(apartment.web_url + "#pioneer")
+        page.wait_for_selector("body[data-ready=true]")
+        page.get_by_text("This page commands pioneer-sim").wait_for(timeout=15000)
+        page.wait_for_selector(READY["pioneer"])
+        page.wait_for_function("document.querySelectorAll('.jog-grid').length === 2", timeout=15000)
+        assert axe(page) == []
+    finally:
+        context.close()
