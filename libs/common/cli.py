@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 from typing import Callable
 
-from asibot import keys, messages
+from asibot import keys, messages, navcli
 from asibot.bus import DEFAULT_ROUTER, ROUTER_ENV, Bus, open_router, router_endpoint
 from asibot.errors import AsibotError
 from asibot.estop import who
@@ -350,6 +350,8 @@ def build_parser() -> argparse.ArgumentParser:
         rf.add_argument("robot")
         rf.add_argument("--wait", type=float, default=2.0, help="seconds to wait for the router")
         rf.set_defaults(func=cmd_driver_verb, verb=verb, done=done)
+
+    navcli.add_parser(sub)
 
     rc = sub.add_parser("recordings", help="list recordings with duration, topics and counts")
     rc.add_argument("dir", nargs="?", default=os.environ.get("ASIBOT_RECORDINGS", "recordings"))

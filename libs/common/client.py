@@ -18,10 +18,17 @@ from asibot.messages import EStop
 
 #: Per-call timeout for quick verbs, s.
 CALL_TIMEOUT = 5.0
+#: How often NavClient.wait asks how the goal goes, s.
+WAIT_POLL = 0.2
 
 
-class CartesianClient:
-    """`robot = CartesianClient(); robot.open("asibot-sim"); robot.movl(home); robot.wait()`."""
+class _Client:
+    """What the user's clients share: one robot, one bus connection, calls with a timeout,
+    and the robot's emergency stop."""
+
+    #: The verb whose answer says the service is there, and how to start it, for `open`.
+    _probe = ""
+    _service = ""
 
     def __init__(self, robot: str | None = None, timeout: float = CALL_TIMEOUT) -> None:
         self.robot: str | None = None
@@ -30,14 +37,17 @@ class CartesianClient:
         if robot:
             self.open(robot)
 
+    def _key(self, verb: str) -> str:
+        raise NotImplementedError
+
     def open(self, robot: str) -> bool:
-        """Connect to the kinematics service of `robot`; raises Unavailable if it does not answer."""
+        """Connect to the service of `robot`; raises Unavailable if it does not answer."""
         if self._bus is None:
             self._bus = Bus("client", wait=self.timeout)
         self.robot = robot.strip("/")
-        if not self._bus.wait_for(keys.cart_rpc(self.robot, "stat"), timeout=self.timeout):
-            raise RpcError("unavailable", f"No kinematics service answers for robot {self.robot!r}; "
-                                          f"start it with `python -m asibot.kinematics --robot {self.robot}`.")
+        if not self._bus.wait_for(self._key(self._probe), timeout=self.timeout):
+            raise RpcError("unavailable", f"No {self._service} service answers for robot {self.robot!r}; "
+                                          f"start it with `python -m asibot.{self._service} --robot {self.robot}`.")
         return True
 
     def close(self) -> None:
@@ -45,17 +55,47 @@ class CartesianClient:
             self._bus.close()
             self._bus = None
 
-    def __enter__(self) -> "CartesianClient":
+    def __enter__(self):
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def _call(self, verb: str, _timeout: float | None = None, _nav: bool = False, **request: object) -> dict:
+    def _call(self, verb: str, _timeout: float | None = None, **request: object) -> dict:
         bus = self._connected()
-        key = keys.nav_rpc(self.robot, verb) if _nav else keys.cart_rpc(self.robot, verb)
         body = {k: list(v) if isinstance(v, (tuple, list)) else v for k, v in request.items() if v is not None}
-        return bus.call(key, body, timeout=_timeout or self.timeout)
+        return bus.call(self._key(verb), body, timeout=_timeout or self.timeout)
+
+    def _connected(self) -> Bus:
+        if self._bus is None or self.robot is None:
+            raise RpcError("bad_request", "Call open(robot) first.")
+        return self._bus
+
+    # --- safety: every client can stop its robot -------------------------------------------
+    def estop(self, reason: str = "emergency stop from a program") -> None:
+        """Engage the robot's emergency stop: it stops at once and refuses every motion until
+        release(). The drivers and the controller keep it latched, so it holds after this program
+        ends (asibot.estop); their events say who engaged it (this user, program and pid)."""
+        self._connected().latch(keys.estop(self.robot), EStop(engaged=True, reason=reason, by=who()))
+
+    def release(self, reason: str = "released from a program") -> None:
+        """Release the emergency stop. Nothing moves by itself afterwards: the robot moves again
+        only on a motion request made after the release. The drivers' events say who released it."""
+        self._connected().latch(keys.estop(self.robot), EStop(engaged=False, reason=reason, by=who()))
+
+    def reset_fault(self) -> dict:
+        """Ask the robot's driver to clear a fault (re-initialise the drive that failed);
+        raises RpcError with the driver's sentence when the fault is still there."""
+        return self._connected().call(keys.driver_rpc(self.robot, "reset_fault"), timeout=self.timeout)
+
+
+class CartesianClient(_Client):
+    """`robot = CartesianClient(); robot.open("asibot-sim"); robot.movl(home); robot.wait()`."""
+
+    _probe, _service = "stat", "kinematics"
+
+    def _key(self, verb: str) -> str:
+        return keys.cart_rpc(self.robot, verb)
 
     # --- the seed's verbs ---------------------------------------------------------------
     def stat(self, res: list | None = None) -> list[float]:
@@ -135,39 +175,91 @@ class CartesianClient:
         """Close (or open) the gripper; True when it holds something afterwards."""
         return self.act("close" if close else "open")["holding"]
 
-    # --- safety ----------------------------------------------------------------------------
-    def estop(self, reason: str = "emergency stop from a program") -> None:
-        """Engage the robot's emergency stop: it stops at once and refuses every motion until
-        release(). The drivers and the controller keep it latched, so it holds after this program
-        ends (asibot.estop); their events say who engaged it (this user, program and pid)."""
-        self._connected().latch(keys.estop(self.robot), EStop(engaged=True, reason=reason, by=who()))
 
-    def release(self, reason: str = "released from a program") -> None:
-        """Release the emergency stop. Nothing moves by itself afterwards: the robot moves again
-        only on a motion request made after the release. The drivers' events say who released it."""
-        self._connected().latch(keys.estop(self.robot), EStop(engaged=False, reason=reason, by=who()))
+class NavClient(_Client):
+    """The nav service's verbs for a mobile robot:
+    `base = NavClient("pioneer-sim"); base.goto("fridge"); base.wait()`.
 
-    def reset_fault(self) -> dict:
-        """Ask the robot's driver to clear a fault (re-initialise the drive that failed);
-        raises RpcError with the driver's sentence when the fault is still there."""
-        return self._connected().call(keys.driver_rpc(self.robot, "reset_fault"), timeout=self.timeout)
+    `goto`, `drive`, `turn` and `primitive` start the motion and return at once (a new one
+    replaces the running one); `wait` blocks until it ends and raises RpcError with the
+    server's sentence when it did not end where asked ("could not reach fridge: ...")."""
 
-    def _connected(self) -> Bus:
-        if self._bus is None or self.robot is None:
-            raise RpcError("bad_request", "Call open(robot) first.")
-        return self._bus
+    _probe, _service = "status", "nav"
 
-    # --- mobile robot verbs (nav service) -------------------------------------------------
-    def goto(self, place: str, timeout: float = 10.0) -> dict:
-        return self._call("goto", _timeout=timeout, _nav=True, place=place)
+    def _key(self, verb: str) -> str:
+        return keys.nav_rpc(self.robot, verb)
 
-    def drive(self, distance: float) -> dict:
-        """Drive straight `distance` metres (negative: backwards)."""
-        return self._call("drive", _nav=True, distance=distance)
+    def goto(self, target: str | Sequence[float]) -> int:
+        """Go to a named place ("fridge") or a pose (x, y, theta in m, m, rad, map frame);
+        returns the goal's id at once."""
+        if isinstance(target, str):
+            return self._call("goto", place=target)["goal_id"]
+        return self._call("goto", pose=list(target))["goal_id"]
 
-    def turn(self, angle: float) -> dict:
-        """Turn in place by `angle` degrees (positive: counter-clockwise)."""
-        return self._call("turn", _nav=True, angle=angle)
+    def wait(self, goal_id: int | None = None, timeout: float | None = None) -> dict:
+        """Block until goal `goal_id` (default: whatever drives the base now) ends; its result
+        {"state", "text", ...}. Raises RpcError when it did not succeed: "unreachable" when it
+        was aborted, "busy" when it was canceled or replaced; Timeout after `timeout` s (the
+        motion goes on: call cancel() to stop it)."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            r = self._call("result", goal_id=goal_id) if goal_id is not None else self._call("status")
+            if r["state"] not in ("active", "idle") or (r["state"] == "idle" and goal_id is None):
+                break
+            if deadline is not None and time.monotonic() >= deadline:
+                raise Timeout(f"The robot was still on its way after {timeout:g} s ({r['text']}); it goes on.")
+            time.sleep(WAIT_POLL)
+        if r["state"] in ("succeeded", "idle"):
+            return r
+        code = "unreachable" if r["state"] == "aborted" else "estop" if "emergency stop" in r["text"] else "busy"
+        raise RpcError(code, r["text"][:1].upper() + r["text"][1:])
+
+    def cancel(self, goal_id: int | None = None) -> dict:
+        """Cancel the running goal (or `goal_id`, if it is the one running)."""
+        return self._call("cancel", goal_id=goal_id)
+
+    def stop(self) -> None:
+        """Stop whatever drives the base: a goal or a primitive."""
+        self._call("primitive", name="stop")
+
+    def status(self) -> dict:
+        """The latest goal's or drive's state and sentence, and the robot's pose."""
+        return self._call("status")
+
+    def pose(self) -> list[float]:
+        """Where the robot believes it is: x, y, theta (m, m, rad, map frame)."""
+        return self._call("status")["pose"]
+
+    def places(self) -> dict[str, list[float]]:
+        """The named places: name -> [x, y, theta]."""
+        return {p["name"]: p["pose"] for p in self._call("places")["places"]}
+
+    def save_place(self, name: str, pose: Sequence[float] | None = None, replace: bool = False) -> list[float]:
+        """Save a place where the robot stands (or at `pose`); `replace` moves an existing one."""
+        return self._call("save_place", name=name, pose=pose, replace=replace or None)["pose"]
+
+    def rename_place(self, name: str, new_name: str) -> None:
+        self._call("rename_place", name=name, new_name=new_name)
+
+    def remove_place(self, name: str) -> None:
+        self._call("remove_place", name=name)
+
+    def drive(self, distance: float) -> str:
+        """Drive straight `distance` m (negative: backwards), stopping before obstacles."""
+        return self._call("drive", distance=distance)["text"]
+
+    def turn(self, angle: float) -> str:
+        """Turn in place by `angle` degrees (positive: left, counter-clockwise)."""
+        return self._call("turn", angle=angle)["text"]
+
+    def primitive(self, name: str, continuous: bool = False) -> str:
+        """One of the thesis's driving primitives ("forward", "turn left 90", "curve forward
+        left", ...); `continuous` goes on until stop()."""
+        return self._call("primitive", name=name, continuous=continuous or None)["text"]
+
+    def set_pose(self, pose: Sequence[float]) -> None:
+        """Tell localisation where the robot is (x, y, theta in m, m, rad, map frame)."""
+        self._call("set_pose", pose=list(pose))
 
 
 def default_robot() -> str:

@@ -16,8 +16,11 @@ RPC_VERBS_CART = (
     "stat", "inv", "fwd", "movj", "movl", "movv", "movjv", "relj", "stop", "wait", "tool", "act",
     "home", "pointer",
 )
-RPC_VERBS_NAV = ("goto", "cancel", "places", "save_place", "drive", "turn")
+RPC_VERBS_NAV = ("goto", "cancel", "result", "status", "places", "save_place", "rename_place", "remove_place",
+                 "save_position", "recall_position", "drive", "turn", "primitive", "settings", "set_pose",
+                 "localize", "save_map")
 RPC_VERBS_PERCEPTION = ("find",)
+RPC_VERBS_TASKS = ("list", "launch", "stop", "status")
 
 
 def _chunk(value: str, what: str) -> str:
@@ -156,6 +159,14 @@ def nav_rpc(robot_id: str, verb: str) -> str:
 def perception_rpc(robot_id: str, verb: str) -> str:
     """Perception's verbs (`find`: where a coloured object is, in the robot's base frame)."""
     return f"{robot(robot_id)}/perception/rpc/{_chunk(verb, 'verb')}"
+
+
+def tasks_rpc(verb: str) -> str:
+    """The Task Creator's tasks, served by the web service (which owns the program runner):
+    `list` the tasks, `launch` one by name on a robot, `stop` the running program, its `status`."""
+    if verb not in RPC_VERBS_TASKS:
+        raise ValueError(f"tasks verb {verb!r} is not one of {', '.join(RPC_VERBS_TASKS)}")
+    return f"tasks/rpc/{verb}"
 
 
 def estop(robot_id: str) -> str:

@@ -500,6 +500,58 @@ class Pose2D:
 
 
 @message
+class NavPose:
+    """Where localisation believes the robot is: map frame, m and rad. `covariance` is the 3x3
+    covariance of (x, y, theta) row by row; `localised` says the filter is sure enough to drive
+    on it; `particles` (N x 3 float32: x, y, theta) a sample of the filter's particles, for a map view."""
+    x: float
+    y: float
+    theta: float
+    covariance: list[float]
+    localised: bool
+    particles: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 3), np.float32))
+
+
+@message
+class NavMap:
+    """The map nav uses (ROS nav_msgs/OccupancyGrid): `data` int8 (height, width), row 0 at the
+    origin, 0 free, 100 occupied, -1 unknown; `origin` is the pose (x, y, theta) of the lower-left
+    corner of cell (0, 0); `resolution` m per cell."""
+    resolution: float
+    origin: list[float]
+    data: np.ndarray
+    name: str = ""
+
+
+@message
+class NavPath:
+    """The planned path of the running goal (N x 2 float32, map frame, m); empty when none."""
+    goal_id: int
+    points: np.ndarray
+    length: float = 0.0
+
+
+@message
+class NavStatus:
+    """How navigation goes, for people: `state` is idle, active, succeeded, aborted, canceled or
+    preempted (actionlib's); `text` a sentence ("driving to fridge, 3.2 m left"); `goal` x, y,
+    theta or empty; `distance` m and `eta` s left; `driving` the running primitive's sentence
+    ("forward, 1.00 m") or empty; `speed` and `width` the primitives' levels."""
+    goal_id: int
+    state: str
+    text: str
+    place: str = ""
+    goal: list[float] = dataclasses.field(default_factory=list)
+    distance: float = 0.0
+    eta: float = 0.0
+    recoveries: int = 0
+    driving: str = ""
+    localised: bool = False
+    speed: int = 0
+    width: int = 0
+
+
+@message
 class CartState:
     """Cartesian controller state; pose and joints in SI (rotations and joints in rad)."""
     state: str

@@ -42,7 +42,9 @@ Facts in ../shared/reference/ros.md section 4 (amcl pf.c, amcl_laser.cpp, amcl_o
   in heading; between updates, `pose(odom)` carries the last estimate forward by odometry
   (amcl's map->odom transform).
 - The estimate is the weighted mean of the heaviest cluster (particles in connected 0.5 m
-  bins), with its covariance; "converged" is amcl's: every particle within 0.5 m of the mean.
+  bins, counting only bins that hold weight), with its covariance, taken from the weighted set before resampling (amcl takes it
+  after, when the injected random poses weigh as much as the rest); "converged" is amcl's:
+  every particle within 0.5 m of the mean.
 """
 
 from __future__ import annotations
@@ -93,6 +95,9 @@ class AmclParams:
     converged_dist: float = 0.5
     bin_xy: float = 0.5
     bin_theta: float = math.radians(10.0)
+    #: a 0.5 m bin joins the estimate's clusters when it holds at least this share of the
+    #: heaviest bin's weight
+    cluster_min_weight: float = 0.01
 
 
 @dataclass
@@ -205,13 +210,18 @@ class Amcl:
             return False
         self.motion(self._odom, odom)
         self._odom = odom
+        resample = False
         if scan is not None and len(scan.ranges):
             self.sensor(scan)
             self._updates += 1
-            if self._updates % self.params.resample_interval == 0:
-                self.resample()
+            resample = self._updates % self.params.resample_interval == 0
         self._force = False
+        # The estimate is taken from the weighted set, before resampling: once resampled, the
+        # injected random poses weigh as much as the rest and, a few hundred of them joining up
+        # bin to bin across the flat, make the heaviest cluster the whole apartment.
         self.estimate = self._cluster_estimate()
+        if resample:
+            self.resample()
         return True
 
     def motion(self, old: Pose, new: Pose) -> None:
@@ -346,11 +356,15 @@ class Amcl:
         x, y, th, w = self.poses[:, 0], self.poses[:, 1], self.poses[:, 2], self.weights
         bx = np.floor((x - x.min()) / p.bin_xy).astype(np.int64)
         by = np.floor((y - y.min()) / p.bin_xy).astype(np.int64)
-        occ = np.zeros((by.max() + 1, bx.max() + 1), np.uint8)
-        occ[by, bx] = 1
+        # Only bins that hold weight join clusters: a few hundred injected guesses that the last
+        # scan ruled out would otherwise link up bin to bin across the flat, join the robot's
+        # cluster and blur its covariance, or outweigh it together.
+        bin_w = np.zeros((by.max() + 1, bx.max() + 1))
+        np.add.at(bin_w, (by, bx), w)
+        occ = (bin_w >= p.cluster_min_weight * bin_w.max()).astype(np.uint8)
         _, labels = cv2.connectedComponents(occ, connectivity=8)
-        lab = labels[by, bx]
-        best = int(np.argmax(np.bincount(lab, weights=w)))
+        lab = np.where(occ[by, bx] > 0, labels[by, bx], 0)
+        best = int(np.argmax(np.bincount(lab, weights=w)[1:])) + 1
         sel = lab == best
         ws = w[sel] / w[sel].sum()
         mx, my = float(ws @ x[sel]), float(ws @ y[sel])

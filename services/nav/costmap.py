@@ -195,6 +195,17 @@ class Costmap:
 
     # ------------------------------------------------------------------------- queries
 
+    def cost_of_distance(self, d: float) -> int:
+        """The inflation cost of a cell `d` m from the nearest lethal cell (costmap_2d's)."""
+        p = self.params
+        if d <= 0:
+            return LETHAL
+        if d <= self.footprint.inscribed_radius:
+            return INSCRIBED
+        if d > p.inflation_radius:
+            return FREE
+        return int(252.0 * math.exp(-p.cost_scaling_factor * (d - self.footprint.inscribed_radius)))
+
     def cost_at(self, x: np.ndarray | float, y: np.ndarray | float) -> np.ndarray:
         """Cost of the cells holding world points; NO_INFORMATION off the map."""
         rows, cols = self.info.to_cell(x, y)
@@ -203,7 +214,14 @@ class Costmap:
         out[ok] = self.costs[rows[ok], cols[ok]]
         return out
 
-    def footprint_cost(self, x: np.ndarray, y: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    @property
+    def bare_rim_costs(self) -> np.ndarray:
+        """`rim_costs` without the one-cell growth: the footprint as it is, for a robot that
+        must creep out of a tight spot (a doorway where localisation is 5 cm off)."""
+        costs = self.costs
+        return np.where(costs == INSCRIBED, FREE, costs).astype(np.uint8)
+
+    def footprint_cost(self, x: np.ndarray, y: np.ndarray, theta: np.ndarray, grown: bool = True) -> np.ndarray:
         """Highest cost under the footprint's outline (`rim_costs`) and centre at each pose
         (arrays of any shape): >= INSCRIBED means the robot would touch an obstacle or leave
         the map. Inside the outline only the centre is looked up: every cell of the P3-AT's
@@ -217,5 +235,8 @@ class Costmap:
         rows, cols = self.info.to_cell(wx, wy)
         ok = self.info.inside(rows, cols)
         rim = np.full(rows.shape, NO_INFORMATION, np.uint8)
-        rim[ok] = self.rim_costs[rows[ok], cols[ok]]
-        return np.maximum(rim.max(axis=-1), self.cost_at(x, y))
+        rim[ok] = (self.rim_costs if grown else self.bare_rim_costs)[rows[ok], cols[ok]]
+        centre = self.cost_at(x, y)
+        if not grown:   # the outline decides; the centre only must not stand on an obstacle
+            centre = np.where(centre >= LETHAL, centre, FREE)
+        return np.maximum(rim.max(axis=-1), centre)

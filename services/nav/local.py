@@ -56,6 +56,7 @@ class LocalParams:
     yaw_goal_tolerance: float = 0.08
     final_decel_fraction: float = 0.6  # plan to stop using this share of the deceleration
     min_rotate_wz: float = 0.15
+    creep_speed: float = 0.1      # m/s at most where only the bare footprint fits
 
 
 @dataclass
@@ -161,6 +162,11 @@ class LocalController:
         xs, ys, ths = arcs(pose.x, pose.y, pose.theta, V, W, t)
         cost = costmap.footprint_cost(xs, ys, ths)
         ok = (cost < INSCRIBED).all(axis=1)
+        if not ok.any():
+            # a tight spot (a doorway, localisation a few cm off): creep on with the bare
+            # footprint, slowly, rather than give up where the robot still fits
+            cost = costmap.footprint_cost(xs, ys, ths, grown=False)
+            ok = (cost < INSCRIBED).all(axis=1) & (np.abs(V) <= p.creep_speed)
         if not ok.any():
             return self._out(Control(0.0, 0.0, "blocked", self._blocked_text(pose, costmap), remaining), pose)
         ex, ey, eth = xs[:, -1], ys[:, -1], ths[:, -1]

@@ -153,10 +153,13 @@ class Navigator:
     # ------------------------------------------------------------------------------ loop
 
     def step(self, now: float, pose: Pose, scan: LaserScan | None, odom: OdomLike | None,
-             localised: bool = True) -> Command | None:
+             localised: bool = True, scan_pose: Pose | None = None) -> Command | None:
+        """`scan_pose`: where the robot was when the scan was taken (default `pose`); a scan
+        placed at the pose of its arrival smears walls across doorways while the robot turns."""
         finite = all(math.isfinite(v) for v in pose)
-        if scan is not None and finite:
-            self.costmap.update_scan(pose, scan, now)
+        at = scan_pose if scan_pose is not None else pose
+        if scan is not None and finite and all(math.isfinite(v) for v in at):
+            self.costmap.update_scan(at, scan, now)
         localised = localised and finite
         if self.status.state != ACTIVE:
             if self._send_stop:
@@ -183,7 +186,7 @@ class Navigator:
             except NavError as exc:
                 return self._abort(f"could not reach {label}: {exc.message}")
             except Unreachable as exc:
-                return self._start_recovery(now, pose, label, exc.message)
+                return self._start_recovery(now, pose, label, exc.message.rstrip("."))
             self._set_path(now, path, pose)
         ctl = self.controller.compute(pose, velocity, self.costmap)
         self.status.distance_remaining = ctl.remaining
@@ -240,7 +243,7 @@ class Navigator:
     def _start_recovery(self, now: float, pose: Pose, label: str, why: str) -> Command:
         if self._recovery_index >= len(self._recoveries):
             tried = ", ".join(dict.fromkeys(self._tried)) or "nothing"
-            return self._abort(f"could not reach {label}: {why}; I tried {tried}, without success")
+            return self._abort(f"could not reach {label}: {why.rstrip('.')}; I tried {tried}, without success")
         self._recovery = self._recoveries[self._recovery_index]
         self._recovery_index += 1
         self._tried.append(self._recovery.name)

@@ -1,6 +1,6 @@
 """Global planner: A* over the costmap (pyastar2d, C++), then shortcutting and resampling.
 
-Cell costs are navfn's (../shared/reference/ros.md 5.2): neutral 50 + 0.8 x costmap value,
+Cell costs are navfn's (../shared/reference/ros.md 5.2): neutral 50 + factor x costmap value (2.0, see below),
 cells >= INSCRIBED (253) are walls, unknown cells are walls unless `allow_unknown`. The cost
 is divided by the neutral cost so free space costs 1 per cell, which keeps pyastar2d's
 heuristic admissible. pyastar2d was chosen because it is a 56 kB compiled A* that plans a
@@ -32,13 +32,21 @@ from asibot.nav.geometry import Pose
 @dataclass(frozen=True)
 class PlannerParams:
     neutral_cost: float = 50.0
-    cost_factor: float = 0.8
+    #: navfn's 0.8 sent the sim's P3-AT between the kitchen wall and a chair (0.9 m for a
+    #: 0.8 m turning circle) to save 2 m; a base with an arm, near a person, takes the open way
+    #: (global_planner's default is 3.0).
+    cost_factor: float = 2.0
     allow_unknown: bool = False
     #: A goal this close (m) to free space is moved there without a word (nav2 NavfnPlanner: 0.5).
     tolerance: float = 0.25
     #: Around the start, cells in the inscribed band are passable at this cost per cell.
     escape_radius: float = 0.45
     escape_cost: float = 40.0
+    #: Cells nearer an obstacle than the base's turning radius plus a little cost this much
+    #: more each: a passage where the P3-AT fits only straight (0.9 m between a wall and a
+    #: chair) is taken only when there is no other way, and paths keep room to turn.
+    narrow_clearance: float = 0.46
+    narrow_penalty: float = 10.0
     #: Resampled path spacing (m).
     spacing: float = 0.05
     #: Shortcuts may pass cells up to this cost even if the A* path stayed lower.
@@ -99,6 +107,7 @@ class GlobalPlanner:
         if p.allow_unknown:
             blocked &= c != NO_INFORMATION
             w[c == NO_INFORMATION] = (p.neutral_cost + p.cost_factor * INSCRIBED) / p.neutral_cost
+        w[c >= costmap.cost_of_distance(p.narrow_clearance)] += p.narrow_penalty
         w[blocked] = np.inf
         # the way out of the inscribed band around the start
         r = int(math.ceil(p.escape_radius / costmap.info.resolution))

@@ -36,6 +36,8 @@ TURN_SPEEDS = (0.30, 0.50, 0.70, 0.90, 1.10)     # rad/s, by speed level
 STEPS = (0.25, 0.50, 1.00, 1.50, 2.00)           # m, by width level
 TURN_STEPS = (15.0, 30.0, 45.0, 60.0, 90.0)      # deg, by width level
 RADII = (0.40, 0.60, 0.80, 1.20, 1.60)           # m, curve radius by width level
+MAX_STEP = 10.0                                 # m, the longest drive(distance) at once
+MAX_TURN = 2 * math.pi                          # rad, the most turn(angle) turns at once
 
 #: name -> (direction of travel, turn side, kind): kind is straight, turn or curve; a fixed
 #: angle (deg) for the exact turns.
@@ -111,8 +113,11 @@ class Primitives:
     def active(self) -> bool:
         return self._name is not None
 
-    def start(self, now: float, name: object, odom: Pose, continuous: bool = False) -> str:
-        """Begin a primitive from the odometry pose `odom`; a sentence saying what it does."""
+    def start(self, now: float, name: object, odom: Pose, continuous: bool = False,
+              amount: float | None = None) -> str:
+        """Begin a primitive from the odometry pose `odom`; a sentence saying what it does.
+        `amount` replaces the width level's step: metres for a straight or curved step, radians
+        for a turn (`drive(0.7)`, `turn(35)` of a program)."""
         if not isinstance(name, str) or " ".join(name.lower().split()) not in PRIMITIVES:
             raise NavError(f"{quote(name, 30)} is not a driving primitive; use one of {', '.join(PRIMITIVES)}.")
         if not all(math.isfinite(v) for v in odom):
@@ -122,6 +127,12 @@ class Primitives:
             return self.stop()
         direction, side, kind, fixed = PRIMITIVES[name]
         s = self.settings
+        if amount is not None:
+            longest = MAX_TURN if kind == "turn" else MAX_STEP
+            if isinstance(amount, bool) or not isinstance(amount, (int, float)) or not 0 < amount <= longest:
+                unit = f"{math.degrees(longest):.0f} deg" if kind == "turn" else f"{longest:g} m"
+                raise NavError(f"How far to {name} must be a number above 0 and at most {unit}; got {quote(amount, 20)}.")
+            fixed, continuous = (math.degrees(amount) if kind == "turn" else None), False
         if fixed is not None:
             continuous = False
         self._name, self._kind, self._dir, self._side = name, kind, direction, side
@@ -131,7 +142,7 @@ class Primitives:
         self._v = SPEEDS[s.speed - 1]
         self._w = TURN_SPEEDS[s.speed - 1]
         if kind == "straight":
-            self._target = math.inf if continuous else STEPS[s.width - 1]
+            self._target = math.inf if continuous else (amount or STEPS[s.width - 1])
             what = f"{self._target:.2f} m" if not continuous else "until you say stop"
         elif kind == "turn":
             self._target = math.inf if continuous else math.radians(fixed if fixed is not None else TURN_STEPS[s.width - 1])
@@ -140,7 +151,7 @@ class Primitives:
             radius = RADII[s.width - 1]
             self._w = min(self._w, self._v / radius)
             self._v = self._w * radius
-            self._target = math.inf if continuous else STEPS[s.width - 1]
+            self._target = math.inf if continuous else (amount or STEPS[s.width - 1])
             what = f"{self._target:.2f} m on a {radius:.1f} m curve" if not continuous else "until you say stop"
         self.last_text = f"{name}, {what}"
         return self.last_text

@@ -91,13 +91,12 @@ class CameraRays:
         direction = (rot[:, 0, None, None] * a[None, None, :]
                      + rot[:, 1, None, None] * b[None, :, None]
                      + rot[:, 2, None, None])
-        key = (w, h, info.fx, info.fy, info.cx, info.cy, tuple(info.pose))
         return cls(w, h, info.fx, info.fy, info.cx, info.cy, rot, np.asarray(info.pose[:3], float),
-                   np.ascontiguousarray(direction), key)
+                   np.ascontiguousarray(direction), _key(info))
 
     def same(self, info: CameraInfo) -> bool:
         """Whether `info` describes this very camera (CameraInfo arrives with every frame)."""
-        return self.key == (info.width, info.height, info.fx, info.fy, info.cx, info.cy, tuple(info.pose))
+        return _same(self.key, _key(info))
 
     # ------------------------------------------------------------------ points
     def points(self, depth: np.ndarray, stride: int = 1) -> np.ndarray:
@@ -140,3 +139,14 @@ class CameraRays:
             raise BadInput(f"the depth image of {name} contains {'a negative value' if lo < 0 else 'inf'}; "
                            "depths must be metres >= 0, with 0 for no return.")
         return depth
+
+
+
+def _key(info: CameraInfo) -> tuple:
+    return (info.width, info.height, info.fx, info.fy, info.cx, info.cy, *info.pose)
+
+
+def _same(a: tuple, b: tuple) -> bool:
+    """The same camera: a simulated camera's pose on a moving base comes back with new
+    rounding every frame (1e-9 m apart), and must not rebuild its rays each time."""
+    return len(a) == len(b) and a[:2] == b[:2] and all(abs(x - y) <= 1e-6 for x, y in zip(a[2:], b[2:]))

@@ -12,7 +12,8 @@ cone", so it is used where the cameras fail and nowhere else:
   the arc takes the sonar's distance where it is nearer than the depth's or the depth has none.
   If part of the cone is watched by no camera (NaN beams), the echo is taken to come from that
   part, and only those beams get it: a wall heard at the edge of a side sonar's cone must not
-  become a phantom obstacle in front of the camera that sees the way clear.
+  become a phantom obstacle in front of the camera that sees the way clear. There, only echoes
+  within `unwatched_range` are used: farther, the arc's error is larger than what it adds.
 
 Readings outside [min_range, max_range) are ignored: the P3-AT reports its maximum, 4.335 m,
 when no echo comes back (not "free": a specular surface also returns nothing). Transducer
@@ -53,6 +54,11 @@ class SonarRing:
     tolerance: float = 0.1
     """m: a depth return this close to the echo's distance explains the echo."""
     arc_step: float = math.radians(0.5)
+    unwatched_range: float = 1.5
+    """m: where no camera watches, only nearer echoes are laid in. A cone's nearest echo drawn
+    across the cone puts a slanted wall up to r (1 - cos 12.5 deg) / cos(slant) nearer than it
+    is: at 4 m that painted ghost obstacles half a metre inside the rooms of the sim apartment,
+    which navigation's costmap kept and its localisation could not match."""
 
     @classmethod
     def p3at(cls, **kw: float) -> "SonarRing":
@@ -98,7 +104,7 @@ class SonarRing:
         whole = ~np.isnan(ranges[grid.index(x, y)]).any(axis=1)             # cone watched whole
         out = ranges.copy()
         for watched in (True, False):
-            pick = whole == watched
+            pick = (whole == watched) & (watched | (r <= self.unwatched_range))
             if not pick.any():
                 continue
             arc = np.full(grid.beams, np.inf, np.float32)

@@ -97,7 +97,8 @@ class SimService(Service):
         for verb, handler in {"status": self._rpc_status, "reset_fault": self._rpc_reset_fault,
                               "reset_world": self._rpc_reset_world,
                               "set_object_pose": self._rpc_set_object_pose,
-                              "object_pose": self._rpc_object_pose}.items():
+                              "object_pose": self._rpc_object_pose,
+                              "set_robot_pose": self._rpc_set_robot_pose}.items():
             bus.serve(keys.driver_rpc(rid, verb), handler)
         bus.announce(keys.driver_alive(rid))
         self._threads = [threading.Thread(target=self._physics_loop, name="sim-physics", daemon=True)]
@@ -192,6 +193,17 @@ class SimService(Service):
             self.sim.set_object_pose(str(req.get("name", "")), list(req.get("pos", [])), req.get("quat"))
         except (KeyError, ValueError, TypeError) as exc:
             raise RpcError("bad_request", str(exc).strip("'\"")) from None
+        return {}
+
+    def _rpc_set_robot_pose(self, req: dict) -> dict:
+        pose = req.get("pose")
+        if not isinstance(pose, list) or len(pose) != 3 or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) for v in pose):
+            raise RpcError("bad_request", "set_robot_pose takes pose: [x, y, theta] (m, m, rad, map frame).")
+        try:
+            self.sim.set_robot_pose(*map(float, pose))
+        except ValueError as exc:
+            raise RpcError("bad_request", str(exc)) from None
         return {}
 
     def _rpc_object_pose(self, req: dict) -> dict:

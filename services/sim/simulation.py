@@ -204,6 +204,20 @@ class Simulation:
             self.data.qvel[dof:dof + 6] = 0
             mujoco.mj_forward(self.model, self.data)
 
+    def set_robot_pose(self, x: float, y: float, theta: float) -> None:
+        """Teleport the mobile base (a "kidnapped robot" test): its odometry does not see it,
+        as the wheels of a robot carried elsewhere turn not."""
+        if self.scene.base is None:
+            raise ValueError("this robot has no mobile base to move")
+        if not all(math.isfinite(v) for v in (x, y, theta)):
+            raise ValueError("x, y and theta must be finite numbers (m, m, rad, map frame)")
+        with self.lock:
+            b = self.scene.base
+            body0 = self.model.body_pos[b.body]
+            self.data.qpos[b.qpos] = [x - body0[0], y - body0[1], theta]
+            self.data.qvel[b.dof] = 0.0
+            mujoco.mj_forward(self.model, self.data)
+
     # ------------------------------------------------------------------ the step
     def step(self, n: int = 1) -> None:
         """Advance the world by n physics steps (2 ms each)."""

@@ -155,11 +155,11 @@ def restore(name: str, version: str, request: Request) -> dict:
 
 
 # --- running -----------------------------------------------------------------------------------
-def _start(web, program: str, robot: str, task: str | None = None) -> dict:
+def _start(web, program: str, robot: str) -> dict:
     _known(web, robot)
     path = web.data.program_file(program)
     try:
-        web.runner.start(path, robot, name=task or program)
+        web.runner.start(path, robot, name=program)
     except RuntimeError as exc:
         raise RpcError("busy", str(exc)) from None
     return web.runner.status()
@@ -220,8 +220,8 @@ def delete_task(name: str, request: Request) -> dict:
 @router.post("/tasks/{name}/launch", summary="launch a task's program on a robot")
 def launch(name: str, body: Run, request: Request) -> dict:
     web = _web(request)
-    task = web.data.task(name)
-    return _start(web, task.program, body.robot, task=task.name)
+    web.tasks.launch(name, _known(web, body.robot))
+    return web.runner.status()
 
 
 # --- icons -------------------------------------------------------------------------------------

@@ -24,12 +24,14 @@ from asibot.errors import RpcError
 from asibot.web import errors
 from asibot.web.api_files import ICON_LIMIT, IMPORT_LIMIT
 from asibot.web.api_files import router as files_router
+from asibot.web import api_base
 from asibot.web.api_robots import router as robots_router
 from asibot.web.cameras import Cameras
 from asibot.web.fleet import Fleet
 from asibot.web.live import Live
 from asibot.web.motion import Motion
 from asibot.web.runner import ProgramRunner
+from asibot.web.tasks_bus import TaskDesk
 from asibot.web.userdata import UserData
 
 STATIC = Path(__file__).resolve().parent / "static"
@@ -50,6 +52,7 @@ class Web:
     runner: ProgramRunner
     live: Live
     cameras: Cameras
+    tasks: TaskDesk
 
 
 class BodyLimit:
@@ -103,10 +106,11 @@ def create_app(web: Web) -> FastAPI:
     errors.install(app)
     app.include_router(robots_router)
     app.include_router(files_router)
+    app.include_router(api_base.router)
 
     @app.get("/api/config", summary="what the page needs to draw its controls")
     def config() -> dict:
-        return {"jog": web.motion.settings.as_json()}
+        return {"jog": web.motion.settings.as_json(), "base": api_base.config()}
 
     @app.websocket("/ws")
     async def feed(socket: WebSocket) -> None:

@@ -17,8 +17,10 @@ from typing import Any, Callable
 
 from asibot import keys, robots
 from asibot.bus import Bus
-from asibot.messages import ArmState, CartState, EStop, Event, GripperState, Odometry
+from asibot.messages import (ArmState, CartState, EStop, Event, GripperState, LaserScan, NavMap, NavPath, NavPose,
+                             NavStatus, Odometry)
 from asibot.poses import user_point
+from asibot.web.nav_view import map_json, nav_json
 
 #: Events kept per robot for the page (newest last).
 EVENTS_KEPT = 20
@@ -36,6 +38,11 @@ class RobotView:
     gripper: GripperState | None = None
     odom: Odometry | None = None
     estop: EStop | None = None
+    nav_pose: NavPose | None = None
+    nav_status: NavStatus | None = None
+    nav_path: NavPath | None = None
+    nav_map: NavMap | None = None
+    scan: LaserScan | None = None
     events: collections.deque = field(default_factory=lambda: collections.deque(maxlen=EVENTS_KEPT))
 
     def point(self) -> list[float] | None:
@@ -68,6 +75,7 @@ class RobotView:
             "base": None if self.odom is None else {
                 "x": round(self.odom.x, 3), "y": round(self.odom.y, 3),
                 "theta_deg": round(math.degrees(self.odom.theta), 1)},
+            "nav": nav_json(self.nav_pose, self.nav_status, self.nav_path, self.scan),
             "events": list(self.events),
         }
 
@@ -91,6 +99,11 @@ class Fleet:
         self._follow(keys.cart_state, CartState, "cart")
         self._follow(keys.gripper_state, GripperState, "gripper")
         self._follow(keys.base_odom, Odometry, "odom")
+        self._follow(keys.nav_pose, NavPose, "nav_pose")
+        self._follow(keys.nav_status, NavStatus, "nav_status")
+        self._follow(keys.nav_path, NavPath, "nav_path")
+        self._follow(keys.scan, LaserScan, "scan")
+        bus.subscribe(keys.every_robot(keys.nav_map), NavMap, self._on("nav_map"), with_key=True, latest=True)
         bus.subscribe(keys.every_robot(keys.estop), EStop, self._on("estop"), with_key=True, latest=True)
         bus.subscribe(keys.every_robot(keys.events), Event, self._on_event, with_key=True, maxsize=200)
 
@@ -146,6 +159,12 @@ class Fleet:
     def views(self) -> list[dict[str, Any]]:
         with self._lock:
             return [v.as_json() for r, v in sorted(self._robots.items()) if v.driver or v.controller]
+
+    def map(self, robot_id: str) -> dict[str, Any] | None:
+        """The robot's navigation map for the Base page, or None before nav latched one."""
+        with self._lock:
+            view = self._robots.get(robot_id)
+            return None if view is None or view.nav_map is None else map_json(view.nav_map)
 
     def point(self, robot_id: str) -> list[float] | None:
         """The robot's current point in m and deg, or None before its first Cartesian state."""

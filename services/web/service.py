@@ -23,7 +23,8 @@ from asibot.web.cameras import Cameras
 from asibot.web.fleet import Fleet
 from asibot.web.live import Live
 from asibot.web.motion import Motion
-from asibot.web.runner import ProgramRunner
+from asibot.web.runner import ProgramRunner, RunResult
+from asibot.web.tasks_bus import TaskDesk
 from asibot.web.userdata import UserData, default_root
 
 NAME = "web"
@@ -57,10 +58,11 @@ class WebService(runtime.Service):
         runner = ProgramRunner(
             env={"ASIBOT_ROUTER": bus.endpoint},
             on_output=lambda stream, line: live.send({"type": "output", "stream": stream, "line": line}),
-            on_exit=lambda result: live.send({"type": "run", "status": self.web.runner.status()}),
+            on_exit=self._ended,
             stop_robot=lambda robot: _stop_quietly(motion, robot))
+        tasks = TaskDesk(bus, data, runner, is_live=lambda robot: robot in self.fleet.ids())
         self.web = Web(fleet=self.fleet, motion=motion, data=data, runner=runner, live=live,
-                       cameras=Cameras(bus))
+                       cameras=Cameras(bus), tasks=tasks)
         self.app = create_app(self.web)
         tls: dict = {}
         if lan:
@@ -81,6 +83,10 @@ class WebService(runtime.Service):
                                                     ws_ping_interval=5.0, ws_ping_timeout=5.0, **tls))
         # uvicorn installs its own signal handlers in run(); the runtime owns the signals.
         self.server.install_signal_handlers = lambda: None  # type: ignore[method-assign]
+
+    def _ended(self, result: RunResult) -> None:
+        self.web.live.send({"type": "run", "status": self.web.runner.status()})
+        self.web.tasks.finished(result)
 
     def health(self) -> dict:
         return {"pages": len(self.web.live.pages), "running": self.web.runner.running(),

@@ -25,6 +25,12 @@ def test_every_registered_message_round_trips():
         m.Pose2D(x=1, y=2, theta=3), m.CartState(state="movl", pose=[0, 0, 1.4, 0, 0], joints=[0] * 5),
         m.EStop(engaged=True, reason="button"), m.Event(level="warning", code="obstacle", text="Obstacle ahead."),
         m.Health(service="s", instance="i", uptime=1.0, pid=3, details={"a": 1}),
+        m.NavPose(x=1, y=2, theta=0.5, covariance=[0.1] * 9, localised=True,
+                  particles=np.ones((4, 3), np.float32)),
+        m.NavMap(resolution=0.05, origin=[-1.0, -2.0, 0.0], data=np.full((3, 4), -1, np.int8), name="apartment"),
+        m.NavPath(goal_id=3, points=np.zeros((2, 2), np.float32), length=1.5),
+        m.NavStatus(goal_id=3, state="active", text="driving to fridge, 3.2 m left", place="fridge",
+                    goal=[1.0, 2.0, 0.0], distance=3.2, eta=8.0, speed=2, width=3),
     ]
     assert {type(s).__name__ for s in samples} == set(m.REGISTRY)
     for msg in samples:

@@ -68,6 +68,37 @@ def test_relocalises_after_a_kidnap(apartment, station):
     assert d < 0.15 and a < math.radians(10), f"still lost: {d:.2f} m, {math.degrees(a):.0f} deg off"
 
 
+def test_injected_random_poses_do_not_blur_a_tracked_estimate(apartment, station):
+    """A moment of low likelihood (a box in front of the laser) injects random poses; they are
+    guesses to be weighed by the next scan, not part of where the robot is now."""
+    sim = TinySim(apartment.grid, pose=station, odom=Pose(0.0, 0.0, 0.0), seed=3)
+    amcl = Amcl(apartment.grid, seed=3)
+    amcl.set_pose(station)
+    drive(sim, amcl, 0.0, 0.8, 3.0)
+    drive(sim, amcl, 0.3, 0.0, 2.0)
+    assert error(sim, amcl)[0] < 0.1 and amcl.estimate.std_xy < 0.2
+    for _ in range(10):
+        amcl.w_slow = 10 * amcl.w_fast                  # as after a run of poor scans: inject the cap
+        drive(sim, amcl, 0.2, 0.0, 0.3)
+        assert amcl.estimate.std_xy < 0.3, f"the estimate spread to {amcl.estimate.std_xy:.2f} m"
+        assert error(sim, amcl)[0] < 0.15
+
+
+def test_guesses_the_scan_ruled_out_stay_out_of_the_estimate(apartment, station):
+    """A tight, heavy cluster where the robot is, and a thousand random guesses that carry 2 % of
+    the weight between them: the estimate is the cluster, its spread is the cluster's."""
+    amcl = Amcl(apartment.grid, seed=4)
+    amcl.set_pose(station, cov=(0.05 ** 2, 0.05 ** 2, 0.03 ** 2))
+    tracked = amcl.poses[:500].copy()
+    guesses = amcl._random_poses(1000)
+    amcl.poses = np.r_[tracked, guesses]
+    amcl.weights = np.r_[np.full(500, 1.0), np.full(1000, 0.01)]
+    amcl.weights /= amcl.weights.sum()
+    est = amcl._cluster_estimate()
+    assert est.pose.distance(station) < 0.05
+    assert est.std_xy < 0.1, f"the guesses spread the estimate to {est.std_xy:.2f} m"
+
+
 def test_global_localisation_spreads_over_free_space(apartment):
     amcl = Amcl(apartment.grid, seed=1)
     amcl.global_localization()

@@ -28,7 +28,8 @@ START = (1.0, 1.5)       # the pioneer body's pos in the MJCF: its slide joints 
 # ---------------------------------------------------------------------- geometry from the MJCF
 def obstacles(band=BAND):
     """Boxes (x0, y0, x1, y1) and cylinders (x, y, r) of the world file that reach into the band:
-    static geoms only (not the robot, not the free objects), read from the XML itself."""
+    static geoms and the box on the floor (not the robot, not the objects on furniture), read
+    from the XML itself."""
     root = ET.parse(world_path("apartment")).getroot()
     box_classes = {d.get("class") for d in root.iter("default")
                    if d.find("geom") is not None and d.find("geom").get("type") == "box"}
@@ -47,7 +48,8 @@ def obstacles(band=BAND):
             else:
                 cylinders.append((pos[0], pos[1], size[0]))
         for b in parent.findall("body"):
-            if b.find("freejoint") is None and b.get("name") != "pioneer":
+            # the cans and cups stand on furniture; the cardboard box stands on the floor
+            if (b.find("freejoint") is None or b.get("name") == "box") and b.get("name") != "pioneer":
                 visit(b, offset + np.array([float(v) for v in b.get("pos", "0 0 0").split()]))
 
     visit(root.find("worldbody"), np.zeros(3))

@@ -46,8 +46,10 @@ def kitchen(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def apartment(tmp_path_factory):
-    """The apartment simulation with the Pioneer and its Katana arm, its kinematics and the page."""
-    stack = _stack(tmp_path_factory.mktemp("apartment"), ["kinematics-pioneer-sim"], ["sim/pioneer-sim", "kinematics/pioneer-sim"])
+    """The apartment simulation with the Pioneer and its Katana arm, its kinematics, perception
+    and navigation, and the page."""
+    stack = _stack(tmp_path_factory.mktemp("apartment"), ["kinematics-pioneer-sim", "nav-pioneer-sim"],
+                   ["sim/pioneer-sim", "kinematics/pioneer-sim", "perception/pioneer-sim", "nav/pioneer-sim"])
     yield stack
     stack.stop()
 

@@ -35,8 +35,10 @@ READY = {
     "home": "text=Teach the robot a task", "joint": ".jog-grid button", "cartesian": ".jog-grid button",
     "program": ".cm-content", "speech": ".points li", "assigner": ".icons button", "launcher": ".task-button",
     "video": ".video img, .video p", "access": "#access-intervalMs", "pioneer": ".jog-grid button",
+    "base": ".points li[data-place=fridge]",
 }
-KITCHEN_VIEWS = [v for v in READY if v != "pioneer"]
+APARTMENT_VIEWS = ("pioneer", "base")
+KITCHEN_VIEWS = [v for v in READY if v not in APARTMENT_VIEWS]
 
 
 def http(stack, method: str, path: str, body: dict | None = None) -> dict:
@@ -475,10 +477,10 @@ def test_tab_alone_reaches_every_control_with_a_visible_focus(page, task, view):
 def test_arrow_keys_reach_every_tab(page):
     page.get_by_role("tab", name="Home").focus()
     names = []
-    for _ in range(10):
+    for _ in range(len(READY)):
         page.keyboard.press("ArrowRight")
         names.append(page.evaluate("document.activeElement.innerText"))
-    assert names[-1] == "Home" and "Access" in names and len(set(names)) == 10
+    assert names[-1] == "Home" and "Access" in names and len(set(names)) == len(READY)
 
 
 def test_good_news_stays_while_pointed_at_or_when_kept(page):
@@ -557,16 +559,17 @@ def test_a_confirm_button_waits_as_long_as_it_takes(page):
     page.get_by_text("keep-me deleted.").wait_for()
 
 
-# Last: the apartment (a second simulation) starts only for this test, after all of the kitchen's.
-def test_axe_on_the_pioneer_page(browser, apartment):
+# Last: the apartment (a second simulation) starts only for these tests, after all of the kitchen's.
+@pytest.mark.parametrize("view", APARTMENT_VIEWS)
+def test_axe_on_the_apartment_pages(browser, apartment, view):
     context = browser.new_context(viewport={"width": 1366, "height": 900})
     page = context.new_page()
     try:
-        page.goto(apartment.web_url + "#pioneer")
+        page.goto(apartment.web_url + f"#{view}")
         page.wait_for_selector("body[data-ready=true]")
-        page.get_by_text("This page commands pioneer-sim").wait_for(timeout=15000)
-        page.wait_for_selector(READY["pioneer"])
-        page.wait_for_function("document.querySelectorAll('.jog-grid').length === 2", timeout=15000)
+        page.wait_for_selector(READY[view], timeout=20000)
+        if view == "pioneer":
+            page.wait_for_function("document.querySelectorAll('.jog-grid').length === 2", timeout=15000)
         assert axe(page) == []
     finally:
         context.close()

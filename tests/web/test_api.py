@@ -238,3 +238,35 @@ def test_latched_estop_from_elsewhere_shows_on_the_page(web, api):
         wait_until(lambda: not svc.fleet.view(ROBOT)["estop"]["engaged"], timeout=5)
     finally:
         other.close()
+
+
+def test_other_services_launch_a_task_on_the_bus_and_hear_how_it_ended(web, api):
+    """The AsTeRICS bridge or the voice service launch a Task Creator task as the Launcher does
+    (`keys.tasks_rpc`), and the robot's events say it started and how it ended."""
+    from asibot.errors import RpcError
+    from asibot.messages import Event
+    from asibot.testing import Inbox
+    client, svc, driver, server = web
+    api.put("/api/programs/say_hello", json={"text": "print('hello from a task')\n"})
+    api.put("/api/tasks/Hello", json={"program": "say_hello", "words": [], "icon": "face.svg"})
+    other = Bus("bridge")
+    heard = Inbox()
+    other.subscribe(keys.events(ROBOT), Event, heard)
+    try:
+        listed = other.call(keys.tasks_rpc("list"), {}, timeout=5)["tasks"]
+        assert {"name": "Hello", "program": "say_hello", "words": []} in listed
+        for bad, code, words in (({"task": "Nope", "robot": ROBOT}, "bad_request", "no task named"),
+                                 ({"task": "Hello", "robot": "ghost"}, "unavailable", "not connected"),
+                                 ({"task": 5, "robot": ROBOT}, "bad_request", "name as text"),
+                                 ({"task": "Hello", "robot": ROBOT, "now": True}, "bad_request", "takes only")):
+            with pytest.raises(RpcError, match=words) as err:
+                other.call(keys.tasks_rpc("launch"), bad, timeout=5)
+            assert err.value.code == code
+        assert not heard.all() and not svc.web.runner.status()["program"] == "Hello"
+        reply = other.call(keys.tasks_rpc("launch"), {"task": "Hello", "robot": ROBOT}, timeout=5)
+        assert reply == {"ok": True, "task": "Hello", "program": "say_hello", "robot": ROBOT}
+        wait_until(lambda: [e.code for e in heard.all()] == ["task_started", "task_done"], timeout=20)
+        assert [e.text for e in heard.all()] == ["Hello: started", "Hello: done"]
+        assert other.call(keys.tasks_rpc("status"), {}, timeout=5)["last"]["ok"] is True
+    finally:
+        other.close()

@@ -7,7 +7,7 @@ import math
 import pytest
 
 from asibot import keys
-from asibot.messages import ArmState
+from asibot.messages import ArmState, Pose2D
 from asibot.testing import Inbox, wait_until
 
 from .conftest import screenshot
@@ -35,3 +35,121 @@ def test_the_pioneer_page_jogs_the_katana(browser, apartment):
         sub.close()
     finally:
         page.close()
+
+
+def _truth(apartment) -> Inbox:
+    truth = Inbox()
+    apartment.bus.subscribe(keys.sim_truth("pioneer-sim"), Pose2D, truth)
+    wait_until(lambda: len(truth), timeout=10)
+    return truth
+
+
+def _still(truth: Inbox) -> bool:
+    last = truth.all()[-10:]
+    return len(last) == 10 and max(math.hypot(p.x - last[0].x, p.y - last[0].y) for p in last) < 0.003
+
+
+def test_the_base_page_drives_the_pioneer_and_sends_it_where_the_map_is_tapped(browser, apartment):
+    page = browser.new_page(viewport={"width": 1366, "height": 1000})
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    truth = _truth(apartment)
+    try:
+        page.goto(apartment.web_url + "#base")
+        page.wait_for_selector("body[data-ready=true]")
+        page.get_by_text("This page drives pioneer-sim").wait_for(timeout=20000)
+        status = page.locator(".nav-status")
+        wait_until(lambda: "not sure" not in status.inner_text() and "Waiting" not in status.inner_text(),
+                   timeout=30, message="nav never localised")
+        page.locator(".points li[data-place=fridge]").wait_for(timeout=10000)   # the places are listed
+
+        # one step forward (width 3: 1 m), by a big button
+        start = truth.last()
+        page.get_by_role("button", name="Forward", exact=True).click()
+        page.locator(".events li", has_text="Forward: done").wait_for(timeout=30000)
+        end = truth.last()
+        assert abs(math.hypot(end.x - start.x, end.y - start.y) - 1.0) < 0.05
+
+        # tap the map in the living room: the robot drives there
+        grid = apartment_json(apartment, "/api/base/pioneer-sim/map")
+        goal = (2.2, 1.0)
+        box = page.locator("canvas.map").bounding_box()
+        px = (goal[0] - grid["origin"][0]) / grid["resolution"] / grid["width"] * box["width"]
+        py = box["height"] - (goal[1] - grid["origin"][1]) / grid["resolution"] / grid["height"] * box["height"]
+        page.locator("canvas.map").click(position={"x": px, "y": py})
+        wait_until(lambda: "arrived" in status.inner_text().lower(), timeout=120, interval=0.5,
+                   message=f"the robot did not arrive: {status.inner_text()}")
+        end = truth.last()
+        assert math.hypot(end.x - goal[0], end.y - goal[1]) < 0.25
+        screenshot(page, "base")
+
+        # save a place here, rename it, remove it
+        page.get_by_label("Name of the new place").fill("by the window")
+        page.get_by_role("button", name="Save this place").click()
+        page.locator(".points li[data-place='by the window']").wait_for(timeout=10000)
+        page.get_by_role("button", name="Rename by the window").click()
+        page.get_by_label("New name for by the window").fill("rug")
+        page.get_by_role("button", name="Save name").click()
+        page.locator(".points li[data-place=rug]").wait_for(timeout=10000)
+        page.get_by_role("button", name="Remove rug").click()
+        page.get_by_role("button", name="Sure? Touch again: Remove rug").click()
+        page.locator(".points li[data-place=rug]").wait_for(state="detached", timeout=10000)
+
+        # a refusal is a sentence in the page, and nothing moves
+        wait_until(lambda: _still(truth), timeout=5, interval=0.1)
+        before = truth.last()
+        page.locator("canvas.map").click(position={"x": 15, "y": 100})   # left of the west wall: outside the home
+        page.locator("#notice").wait_for(timeout=10000)
+        assert page.locator("#notice").inner_text().strip()
+        wait_until(lambda: len(truth) > 0, timeout=2)
+        after = truth.last()
+        assert math.hypot(after.x - before.x, after.y - before.y) < 0.01
+    finally:
+        page.close()
+    assert not errors, errors
+
+
+def apartment_json(apartment, path: str) -> dict:
+    import json
+    import urllib.request
+    with urllib.request.urlopen(apartment.web_url.rstrip("/") + path, timeout=10) as reply:
+        return json.load(reply)
+
+
+def _post(apartment, path: str, body: object) -> tuple[int, dict]:
+    import json
+    import urllib.error
+    import urllib.request
+    data = body if isinstance(body, bytes) else json.dumps(body).encode()
+    req = urllib.request.Request(apartment.web_url.rstrip("/") + path, data=data,
+                                 headers={"Content-Type": "application/json"}, method="POST")
+    try:
+        with urllib.request.urlopen(req, timeout=10) as reply:
+            return reply.status, json.load(reply)
+    except urllib.error.HTTPError as exc:
+        return exc.code, json.load(exc)
+
+
+@pytest.mark.parametrize("path, body, status, words", [
+    ("/api/base/pioneer-sim/goto", {"place": "fridge", "x": 1.0, "y": 1.0}, 400, "not both"),
+    ("/api/base/pioneer-sim/goto", {}, 400, "Say where to go"),
+    ("/api/base/pioneer-sim/goto", {"place": "../etc/passwd"}, 400, "no place called"),
+    ("/api/base/pioneer-sim/goto", {"x": 50.0, "y": 1.0}, 400, "outside the map"),
+    ("/api/base/pioneer-sim/goto", {"x": "a", "y": 1.0}, 422, "x"),
+    ("/api/base/pioneer-sim/drive", {"name": "fly"}, 422, "name"),
+    ("/api/base/pioneer-sim/drive", {"name": "forward", "continuous": "yes"}, 422, "continuous"),
+    ("/api/base/pioneer-sim/settings", {"change": "louder"}, 422, "change"),
+    ("/api/base/pioneer-sim/places", {"name": ""}, 422, "name"),
+    ("/api/base/ghost/goto", {"place": "fridge"}, 503, "not connected"),
+    ("/api/base/pioneer-sim/goto", b"{not json", 422, ""),
+])
+def test_bad_base_requests_get_a_sentence_and_nothing_moves(apartment, path, body, status, words):
+    truth = _truth(apartment)
+    wait_until(lambda: _still(truth), timeout=60, interval=0.1)
+    before = truth.last()
+    code, reply = _post(apartment, path, body)
+    assert code == status, reply
+    assert words in reply["message"] and reply["message"].rstrip().endswith((".", ")", "'")), reply
+    n = len(truth)
+    wait_until(lambda: len(truth) >= n + 10, timeout=5)     # half a second of truth after the refusal
+    assert all(math.hypot(p.x - before.x, p.y - before.y) < 0.01 for p in truth.all()[n:])

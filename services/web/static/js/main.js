@@ -15,9 +15,10 @@ import assigner from './views/assigner.js';
 import launcher from './views/launcher.js';
 import video from './views/video.js';
 import pioneer from './views/pioneer.js';
+import base from './views/base.js';
 import access from './views/access.js';
 
-const VIEWS = [home, joint, cartesian, program, speech, assigner, launcher, video, pioneer, access];
+const VIEWS = [home, joint, cartesian, program, speech, assigner, launcher, video, pioneer, base, access];
 let active = null;   // { view, handle }
 
 function emergencyStop() {

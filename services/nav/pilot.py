@@ -1,0 +1,342 @@
+"""One robot's navigation in one object: where it is, where it goes, and how a person drives it.
+
+The nav service moves messages between the bus and a `Pilot`; tests drive a `Pilot` from a
+simulator. It knows nothing of Zenoh and takes the time as an argument.
+
+- Where it is: AMCL on odometry and scans (`Amcl`). The filter updates when a new scan has
+  come and the robot moved enough; between updates the pose is carried by odometry. The
+  robot counts as localised while the filter's main cluster is tighter than `localised_std`.
+- Where it goes: goals through the `Navigator` (action semantics: `goto` answers a goal id at
+  once, a newer goal preempts, `cancel`, `result`), to a named place (`Places`) or a pose.
+- How a person drives it: the thesis's primitives (`Primitives`), closed-loop on odometry.
+
+Goals and primitives are exclusive: a primitive cancels the running goal and a goal stops the
+running primitive, so one thing at a time drives the base. The emergency stop ends both and
+refuses new ones until it is released; nothing resumes by itself after it. Odometry older than
+`input_timeout` stops whatever runs (the base driver is gone: no closed loop without it); a
+scan older than that counts as no scan (primitives stop: they cannot see).
+
+Every end of a goal or a primitive is told through `on_event(level, code, text)`.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from collections import deque
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from asibot import messages as m
+from asibot.errors import RpcError, quote
+from asibot.nav.amcl import Amcl, AmclParams
+from asibot.nav.costmap import Costmap
+from asibot.nav.errors import NavError
+from asibot.nav.geometry import Pose, as_pose, wrap
+from asibot.nav.grid import OccupancyGrid
+from asibot.nav.navigator import ABORTED, ACTIVE, CANCELED, PREEMPTED, SUCCEEDED, Command, Navigator, NavStatus
+from asibot.nav.places import Places
+from asibot.nav.primitives import Primitives
+
+EventSink = Callable[[str, str, str], None]
+
+#: Which event level and code the end of a goal is told with.
+_GOAL_ENDS = {SUCCEEDED: ("info", "goal_succeeded"), ABORTED: ("warning", "goal_aborted"),
+              CANCELED: ("info", "goal_canceled"), PREEMPTED: ("info", "goal_preempted")}
+
+
+@dataclass(frozen=True)
+class PilotParams:
+    input_timeout: float = 0.5        # s: older odometry or scans are not used
+    localised_std: float = 0.5        # m and rad: the filter's spread below which it can drive
+    particles_shown: int = 300        # particles sent with each pose, for a map view
+    odometry_kept: int = 100          # readings kept to place a late scan (5 s at 20 Hz)
+
+
+@dataclass
+class _Reading:
+    pose: Pose
+    vx: float
+    wz: float
+    at: float          # our clock, s
+    stamp: int         # the producer's, ns
+
+
+def odometry_at(history: "deque[_Reading]", stamp: int, slack_ns: int = 60_000_000) -> Pose | None:
+    """The odometry pose at `stamp` (ns), interpolated between the readings around it: a scan
+    is matched with where the robot was when its images were taken, not where it is when the
+    scan arrives (100-200 ms later on a loaded machine, 0.1-0.2 rad while turning). None when
+    `stamp` is older than the history, or newer than its last reading by more than `slack_ns`."""
+    if not history:
+        return None
+    last = history[-1]
+    if stamp >= last.stamp:
+        return last.pose if stamp - last.stamp <= slack_ns else None
+    if stamp < history[0].stamp:
+        return None
+    stamps = [r.stamp for r in history]
+    i = bisect.bisect_right(stamps, stamp)
+    a, b = history[i - 1], history[i]
+    f = (stamp - a.stamp) / max(1, b.stamp - a.stamp)
+    return Pose(a.pose.x + f * (b.pose.x - a.pose.x), a.pose.y + f * (b.pose.y - a.pose.y),
+                a.pose.theta + f * wrap(b.pose.theta - a.pose.theta))
+
+
+class Pilot:
+    def __init__(self, grid: OccupancyGrid, places: Places, start: Pose, *,
+                 amcl_params: AmclParams = AmclParams(), navigator: Navigator | None = None,
+                 primitives: Primitives | None = None, params: PilotParams = PilotParams(),
+                 on_event: EventSink = lambda level, code, text: None, seed: int | None = None) -> None:
+        self.grid, self.places, self.params = grid, places, params
+        self.amcl = Amcl(grid, amcl_params, seed=seed)
+        self.amcl.set_pose(start)
+        self.navigator = navigator or Navigator(Costmap(grid))
+        self.primitives = primitives or Primitives()
+        self.on_event = on_event
+        self._rng = np.random.default_rng(seed)
+        self._odom: _Reading | None = None
+        self._history: deque[_Reading] = deque(maxlen=params.odometry_kept)
+        self._scan: tuple[m.LaserScan, float] | None = None
+        self._scan_used = True           # the newest scan went into the filter already
+        self._scan_odom: Pose | None = None   # the odometry pose where the newest scan was taken
+        self._driving = False            # a primitive ran at the last tick
+        self._told: int | None = None    # the goal whose end was told
+        #: The latest thing that drove the base, "goal" or "drive", and how the latest drive
+        #: ended (a goal's end is the navigator's): what `status_message` reports.
+        self._latest = "goal"
+        self._drive_state = "idle"
+        self.estopped = False
+
+    # ------------------------------------------------------------------------- inputs
+
+    def odometry(self, now: float, msg: m.Odometry) -> None:
+        pose = Pose(msg.x, msg.y, msg.theta)
+        if all(math.isfinite(v) for v in (*pose, msg.vx, msg.wz)):
+            self._odom = _Reading(pose, msg.vx, msg.wz, now, msg.stamp)
+            if self._history and msg.stamp <= self._history[-1].stamp:
+                self._history.clear()       # a restarted base driver, or a clock step
+            self._history.append(self._odom)
+
+    def scan(self, now: float, msg: m.LaserScan) -> None:
+        self._scan = (msg, now)
+        self._scan_used = False
+
+    def estop(self, now: float, engaged: bool) -> None:
+        """Engaged: end the goal and the primitive now; released: nothing moves by itself."""
+        self.estopped = engaged
+        if engaged:
+            self._end_everything(now, "the emergency stop was engaged")
+
+    # ------------------------------------------------------------------------ queries
+
+    def _fresh_odom(self, now: float) -> _Reading | None:
+        o = self._odom
+        return o if o is not None and now - o.at <= self.params.input_timeout else None
+
+    def _fresh_scan(self, now: float) -> m.LaserScan | None:
+        s = self._scan
+        return s[0] if s is not None and now - s[1] <= self.params.input_timeout else None
+
+    @property
+    def localised(self) -> bool:
+        est = self.amcl.estimate
+        return est is not None and est.std_xy < self.params.localised_std and est.std_theta < self.params.localised_std
+
+    def pose(self) -> Pose:
+        """The map pose now (the filter's estimate carried forward by odometry)."""
+        return self.amcl.pose(self._odom.pose) if self._odom is not None else self.amcl.estimate.pose
+
+    def pose_message(self) -> m.NavPose:
+        p, est = self.pose(), self.amcl.estimate
+        n = len(self.amcl.poses)
+        pick = self._rng.choice(n, size=min(n, self.params.particles_shown), replace=False)
+        return m.NavPose(x=p.x, y=p.y, theta=p.theta, covariance=est.covariance.reshape(-1).tolist(),
+                         localised=self.localised, particles=self.amcl.poses[pick].astype(np.float32))
+
+    def status(self) -> NavStatus:
+        return self.navigator.status
+
+    def status_message(self) -> m.NavStatus:
+        """The latest goal's or drive's state and sentence: a drive is `active`, then
+        `succeeded` (done), `aborted` (an obstacle, no scan) or `canceled` (stopped)."""
+        s, prim = self.navigator.status, self.primitives
+        state, text = s.state, s.text
+        if self._latest == "drive":
+            state, text = ("active" if prim.active else self._drive_state), prim.last_text
+        return m.NavStatus(goal_id=s.goal_id or 0, state=state, text=text, place=s.place,
+                           goal=list(s.goal) if s.goal is not None else [], distance=float(s.distance_remaining),
+                           eta=float(s.eta), recoveries=s.recoveries, driving=prim.last_text if prim.active else "",
+                           localised=self.localised, speed=prim.settings.speed, width=prim.settings.width)
+
+    # ----------------------------------------------------------------------- requests
+
+    def _may_move(self, what: str) -> None:
+        if self.estopped:
+            raise RpcError("estop", f"The emergency stop is engaged; release it before {what}.")
+
+    def goto(self, now: float, place: object = None, pose: object = None) -> dict:
+        """A new goal, to a named place or to a pose [x, y, theta]; its id at once."""
+        if (place is None) == (pose is None):
+            raise NavError("Say where to go: a place name ({\"place\": \"fridge\"}) or a pose "
+                           "({\"pose\": [x, y, theta]}, m and rad), not both.")
+        self._may_move("sending the robot somewhere")
+        if place is not None:
+            found = self.places.get(place)
+            label, goal = found.name, found.pose
+        else:
+            label, goal = "", as_pose(pose, "goal")
+        return self._goto(now, goal, label)
+
+    def recall_position(self, now: float) -> dict:
+        """The thesis's recall: drive back to where `save_position` was called."""
+        self._may_move("sending the robot back")
+        return self._goto(now, self.places.recall_position(), "the saved position")
+
+    def _goto(self, now: float, goal: Pose, label: str) -> dict:
+        if not self.localised:
+            raise RpcError("unavailable", "I am not sure where I am, so I cannot plan a way there. Set my "
+                                          "position on the map (or start localisation) and try again.")
+        if self._fresh_odom(now) is None:
+            raise RpcError("unavailable", "No odometry from the base: is the base driver (or the sim) running?")
+        before = self.navigator.status
+        gid = self.navigator.goto(now, goal, label, self.pose())   # raises, changing nothing, when it cannot
+        if before.state == PREEMPTED:
+            self._tell(before)
+        if self.primitives.active:
+            self.primitives.stop(f"stopped: replaced by the trip to {label or 'the goal'}")
+            self._driving, self._drive_state = False, CANCELED
+        self._latest = "goal"
+        s = self.navigator.status
+        return {"goal_id": gid, "place": label, "goal": list(goal), "text": s.text}
+
+    def cancel(self, now: float, goal_id: object = None) -> dict:
+        if goal_id is not None and (isinstance(goal_id, bool) or not isinstance(goal_id, int)):
+            raise NavError(f"goal_id must be a whole number; got {quote(goal_id, 30)}.")
+        s = self.navigator.cancel(now, goal_id)
+        self._tell_goal_end()
+        return _result(s)
+
+    def result(self, goal_id: object) -> dict:
+        if isinstance(goal_id, bool) or not isinstance(goal_id, int):
+            raise NavError(f"goal_id must be a whole number; got {quote(goal_id, 30)}.")
+        return _result(self.navigator.result(goal_id))
+
+    def drive(self, now: float, name: object, continuous: bool = False, amount: float | None = None) -> dict:
+        """Start a primitive (or `stop`); ends the running goal first."""
+        if name == "stop":
+            return self.stop(now)
+        self._may_move("driving")
+        odom = self._fresh_odom(now)
+        if odom is None:
+            raise RpcError("unavailable", "No odometry from the base: is the base driver (or the sim) running?")
+        if not isinstance(continuous, bool):
+            raise NavError(f"continuous must be true or false; got {quote(continuous, 30)}.")
+        text = self.primitives.start(now, name, odom.pose, continuous, amount)   # raises on a bad name
+        if self.navigator.status.state == ACTIVE:
+            self.navigator.cancel(now)
+            self._tell_goal_end()
+        self._driving, self._latest = True, "drive"
+        return {"text": text}
+
+    def stop(self, now: float) -> dict:
+        """Stop whatever drives the base: the goal and the primitive."""
+        self._end_everything(now, "")
+        return {"text": "stopped"}
+
+    def settings(self, change: object) -> dict:
+        """faster / slower / wider / narrower: one level of the primitives' speed or width."""
+        prim = self.primitives
+        actions = {"faster": prim.faster, "slower": prim.slower, "wider": prim.wider, "narrower": prim.narrower}
+        if change is None:
+            text = f"speed {prim.settings.speed}, width {prim.settings.width}"
+        elif change not in actions:
+            raise NavError(f"{quote(change, 30)} is not a setting change; use one of {', '.join(actions)}.")
+        else:
+            text = actions[change]()
+        return {"text": text, "speed": prim.settings.speed, "width": prim.settings.width}
+
+    def set_pose(self, now: float, pose: object, cov: object = None) -> dict:
+        """"I am here": restart the filter around `pose` (any running goal ends: the way there was
+        planned from a pose that was wrong)."""
+        p = as_pose(pose, "pose")
+        if cov is not None:
+            if not isinstance(cov, (list, tuple)) or len(cov) != 3 or not all(
+                    isinstance(v, (int, float)) and not isinstance(v, bool) for v in cov):
+                raise NavError("cov must be three variances [xx, yy, theta-theta] (m^2, m^2, rad^2).")
+            cov = tuple(float(v) for v in cov)
+        self.amcl.set_pose(p, cov)   # raises on a pose off the map, changing nothing
+        self._end_everything(now, "my position was set again")
+        self._scan_used = False      # the next scan corrects the new guess at once
+        return {"pose": list(p)}
+
+    def localize(self, now: float) -> dict:
+        """Forget where the robot is and look everywhere (amcl's global localisation)."""
+        self.amcl.global_localization()
+        self._end_everything(now, "localisation started again")
+        self._scan_used = False
+        return {"text": "looking for where I am: drive me around a little, or wait"}
+
+    def _end_everything(self, now: float, why: str) -> None:
+        if self.navigator.status.state == ACTIVE:
+            self.navigator.cancel(now)
+            if why:
+                self.navigator.status.text = f"stopped: {why}"
+            self._tell_goal_end()
+        if self.primitives.active:
+            self.primitives.stop(f"stopped: {why}" if why else "stopped")
+            self._driving, self._drive_state = False, CANCELED
+            if why:
+                self.on_event("warning", "drive_stopped", self.primitives.last_text)
+
+    # --------------------------------------------------------------------------- loop
+
+    def tick(self, now: float) -> Command | None:
+        """One control cycle: what to send to the base now, or None to send nothing (nothing
+        drives it: another program may)."""
+        odom = self._fresh_odom(now)
+        scan = self._fresh_scan(now)
+        if odom is None:
+            if self.navigator.status.state == ACTIVE or self.primitives.active:
+                self._end_everything(now, "no odometry from the base for "
+                                          f"{self.params.input_timeout:g} s (is the base driver running?)")
+                return Command(0.0, 0.0)
+            return None
+        if scan is not None and not self._scan_used:
+            self._scan_used = True
+            self._scan_odom = odometry_at(self._history, scan.stamp)
+            if self._scan_odom is not None:
+                self.amcl.update(self._scan_odom, scan)
+        if self.estopped:
+            return None
+        if self.primitives.active or self._driving:
+            motion = self.primitives.step(now, odom.pose, scan)
+            if motion.active:
+                return Command(motion.vx, motion.wz)
+            self._driving = False
+            done = motion.text.endswith(": done")
+            self._drive_state = SUCCEEDED if done else ABORTED
+            self.on_event("info" if done else "warning", "drive_done" if done else "drive_stopped", motion.text)
+            return Command(0.0, 0.0)
+        # the costmap takes a scan only where it was taken (a scan that cannot be placed waits)
+        placed = scan if self._scan_odom is not None else None
+        scan_pose = self.amcl.pose(self._scan_odom) if placed is not None else None
+        cmd = self.navigator.step(now, self.pose(), placed, odom, localised=self.localised, scan_pose=scan_pose)
+        self._tell_goal_end()
+        return cmd
+
+    def _tell_goal_end(self) -> None:
+        self._tell(self.navigator.status)
+
+    def _tell(self, s: NavStatus) -> None:
+        """Tell the end of goal `s` once."""
+        if s.goal_id is not None and s.state in _GOAL_ENDS and self._told != s.goal_id:
+            self._told = s.goal_id
+            level, code = _GOAL_ENDS[s.state]
+            self.on_event(level, code, s.text)
+
+
+def _result(s: NavStatus) -> dict:
+    return {"goal_id": s.goal_id or 0, "state": s.state, "text": s.text, "place": s.place,
+            "distance": float(s.distance_remaining), "recoveries": s.recoveries}

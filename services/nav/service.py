@@ -1,0 +1,337 @@
+"""The nav service on the bus: one instance per robot (`--robot pioneer-sim`).
+
+In: odometry (`keys.base_odom`), the 360-degree scan of the perception service (`keys.scan`),
+the estop (`keys.estop`, followed and kept served as every process that obeys it does).
+Out: velocity commands on `keys.base_cmd_vel` as the robot's base controller (it announces
+itself, `asibot.ownership`, and every Twist carries its identity); `nav/pose` (every cycle
+the filter updated, and at `pose_hz`), `nav/map` (latched), `nav/path` (when it changes),
+`nav/status` (at `status_hz` and on every change), user Events; the RPC verbs of
+`keys.RPC_VERBS_NAV` on `keys.nav_rpc`.
+
+The work is in `Pilot` (localisation, goals, primitives, places); this class runs its
+control loop at `rate` Hz and moves messages between it and the bus. Nothing is sent to the
+base while nothing drives it, so another program can hold the base when nav is idle.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import threading
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from asibot import keys, ownership
+from asibot import messages as m
+from asibot.bus import Bus
+from asibot.errors import arguments as _only, quote
+from asibot.estop import EStopState
+from asibot.files import data_dir
+from asibot.runtime import Service
+from asibot.timing import Ticker
+
+from asibot.nav.errors import NavError
+from asibot.nav.geometry import Pose, as_pose
+from asibot.nav.mapfile import LoadedMap, load_map, save_map
+from asibot.nav.pilot import Pilot
+from asibot.nav.places import Places, check_name
+from asibot.nav.planner import Path as PlannedPath
+
+log = logging.getLogger("asibot.nav")
+
+NAME = "nav"
+SIM_MAPS = Path(__file__).resolve().parent.parent / "sim" / "maps"
+
+
+class NavService(Service):
+    """Navigation of one robot on the bus."""
+
+    def __init__(self, bus: Bus, robot: str, loaded: LoadedMap, places: Places, start: Pose, *,
+                 rate: float = 15.0, pose_hz: float = 5.0, status_hz: float = 4.0,
+                 clock: Callable[[], float] = time.monotonic, seed: int | None = None,
+                 run_loop: bool = True) -> None:
+        self.bus, self.robot, self.loaded, self.clock = bus, robot, loaded, clock
+        self.rate, self.pose_period, self.status_period = rate, 1.0 / pose_hz, 1.0 / status_hz
+        self._lock = threading.Lock()      # the pilot: the loop and the RPC handlers take turns
+        self.pilot = Pilot(loaded.grid, places, start, on_event=self._event, seed=seed)
+        self._pub_cmd = bus.publisher(keys.base_cmd_vel(robot), m.Twist)
+        self._pub_pose = bus.publisher(keys.nav_pose(robot), m.NavPose)
+        self._pub_path = bus.publisher(keys.nav_path(robot), m.NavPath)
+        self._pub_status = bus.publisher(keys.nav_status(robot), m.NavStatus)
+        self._pub_event = bus.publisher(keys.events(robot), m.Event)
+        self.controller = ownership.announce(bus, robot, "base", "nav")
+        self.holder = ownership.Holder(robot, "base")
+        self.holder.follow(bus)
+        self._latch_map()
+        bus.subscribe(keys.base_odom(robot), m.Odometry, self._on_odom)
+        bus.subscribe(keys.scan(robot), m.LaserScan, self._on_scan, maxsize=1, ring=True)
+        self.estop = EStopState(bus, robot, self._on_estop)
+        for verb in keys.RPC_VERBS_NAV:
+            bus.serve(keys.nav_rpc(robot, verb), self._handler(verb))
+        self.cycles = self.commands = 0
+        self.slowest_cycle = 0.0
+        self._last_pose = self._last_status = -math.inf
+        self._status_sent: tuple | None = None
+        self._path_sent: object = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="nav-loop", daemon=True)
+        if run_loop:
+            self._thread.start()
+
+    # ----------------------------------------------------------------------- inputs
+    def _on_odom(self, msg: m.Odometry) -> None:
+        with self._lock:
+            self.pilot.odometry(self.clock(), msg)
+
+    def _on_scan(self, msg: m.LaserScan) -> None:
+        with self._lock:
+            self.pilot.scan(self.clock(), msg)
+
+    def _on_estop(self, msg: m.EStop) -> None:
+        with self._lock:
+            self.pilot.estop(self.clock(), msg.engaged)
+        self._publish_status(force=True)
+
+    def _event(self, level: str, code: str, text: str) -> None:
+        log.info("event %s/%s: %s", level, code, text)
+        self._pub_event.put(m.Event(level=level, code=code, text=text[:1].upper() + text[1:]))
+
+    # ------------------------------------------------------------------------- loop
+    def _loop(self) -> None:
+        ticker = Ticker(self.rate, stop=self._stop)
+        while ticker.wait():
+            try:
+                self.step()
+            except Exception:   # one bad cycle must not end navigation: stop and go on
+                log.exception("a nav cycle failed; the base is stopped")
+                with self._lock:
+                    self.pilot.stop(self.clock())
+                self._send(0.0, 0.0)
+
+    def step(self) -> None:
+        """One control cycle (the loop calls it at `rate`; tests may call it by hand)."""
+        t0 = time.perf_counter()
+        now = self.clock()
+        with self._lock:
+            cmd = self.pilot.tick(now)
+            pose = self.pilot.pose_message() if now - self._last_pose >= self.pose_period else None
+            path = self.pilot.status().path
+        if cmd is not None:
+            self._send(cmd.vx, cmd.wz)
+        if pose is not None:
+            self._last_pose = now
+            self._pub_pose.put(pose)
+        if path is not self._path_sent:
+            self._path_sent = path
+            self._publish_path(path)
+        self._publish_status()
+        self.cycles += 1
+        self.slowest_cycle = max(self.slowest_cycle, time.perf_counter() - t0)
+
+    def _send(self, vx: float, wz: float) -> None:
+        self.commands += 1
+        self._pub_cmd.put(m.Twist(vx=float(vx), wz=float(wz), controller=self.controller))
+
+    def _publish_path(self, path: PlannedPath | None) -> None:
+        gid = self.pilot.status().goal_id or 0
+        if path is None:
+            self._pub_path.put(m.NavPath(goal_id=gid, points=np.zeros((0, 2), np.float32)))
+        else:
+            self._pub_path.put(m.NavPath(goal_id=gid, points=np.asarray(path.points, np.float32),
+                                         length=float(path.length)))
+
+    def _publish_status(self, force: bool = False) -> None:
+        now = self.clock()
+        with self._lock:
+            msg = self.pilot.status_message()
+        what = (msg.goal_id, msg.state, msg.text, msg.driving, msg.localised, msg.speed, msg.width)
+        if force or what != self._status_sent or now - self._last_status >= self.status_period:
+            self._status_sent, self._last_status = what, now
+            self._pub_status.put(msg)
+
+    def _latch_map(self) -> None:
+        grid = self.loaded.grid
+        o = grid.info.origin
+        self.bus.latch(keys.nav_map(self.robot), m.NavMap(
+            resolution=grid.info.resolution, origin=[o.x, o.y, o.theta], data=grid.data,
+            name=self.loaded.yaml_path.stem))
+
+    # -------------------------------------------------------------------------- RPC
+    def _handler(self, verb: str) -> Callable[[dict], dict]:
+        rpc = getattr(self, f"_rpc_{verb}")
+
+        def handle(req: dict) -> dict:
+            with self._lock:
+                reply = rpc(self.clock(), req)
+            self._publish_status(force=True)
+            return reply
+        return handle
+
+    def _rpc_goto(self, now: float, req: dict) -> dict:
+        _only(req, "goto", "place", "pose")
+        holder = self.holder.current
+        if holder is not None and holder != self.controller:
+            raise NavError(f"Another program drives the base of {self.robot} ({holder}); stop it first.")
+        return self.pilot.goto(now, req.get("place"), req.get("pose"))
+
+    def _rpc_cancel(self, now: float, req: dict) -> dict:
+        _only(req, "cancel", "goal_id")
+        return self.pilot.cancel(now, req.get("goal_id"))
+
+    def _rpc_result(self, now: float, req: dict) -> dict:
+        _only(req, "result", "goal_id")
+        return self.pilot.result(req.get("goal_id"))
+
+    def _rpc_status(self, now: float, req: dict) -> dict:
+        _only(req, "status")
+        msg = self.pilot.status_message()
+        pose = self.pilot.pose()
+        return {**{f: getattr(msg, f) for f in msg._fields if f != "stamp"}, "pose": list(pose)}
+
+    def _rpc_places(self, now: float, req: dict) -> dict:
+        _only(req, "places")
+        return {"places": [{"name": p.name, "pose": list(p.pose)} for p in self.pilot.places.list()]}
+
+    def _rpc_save_place(self, now: float, req: dict) -> dict:
+        """Save a place: here (no pose), or at a pose; `replace` moves an existing one."""
+        _only(req, "save_place", "name", "pose", "replace")
+        pose = as_pose(req["pose"], "pose") if req.get("pose") is not None else self._here()
+        place = self.pilot.places.add(req.get("name"), pose, replace=bool(req.get("replace", False)))
+        return {"name": place.name, "pose": list(place.pose)}
+
+    def _rpc_rename_place(self, now: float, req: dict) -> dict:
+        _only(req, "rename_place", "name", "new_name")
+        place = self.pilot.places.rename(req.get("name"), req.get("new_name"))
+        return {"name": place.name, "pose": list(place.pose)}
+
+    def _rpc_remove_place(self, now: float, req: dict) -> dict:
+        _only(req, "remove_place", "name")
+        place = self.pilot.places.remove(req.get("name"))
+        return {"name": place.name}
+
+    def _rpc_save_position(self, now: float, req: dict) -> dict:
+        _only(req, "save_position")
+        return {"pose": list(self.pilot.places.save_position(self._here()))}
+
+    def _rpc_recall_position(self, now: float, req: dict) -> dict:
+        _only(req, "recall_position")
+        return self.pilot.recall_position(now)
+
+    def _rpc_drive(self, now: float, req: dict) -> dict:
+        """Drive straight `distance` m (negative: backwards), closed-loop, stopping before obstacles."""
+        _only(req, "drive", "distance")
+        d = _number(req.get("distance"), "distance", "m")
+        if d == 0:
+            raise NavError("distance must not be 0; use a positive distance forwards or a negative one backwards.")
+        return self.pilot.drive(now, "forward" if d > 0 else "backward", amount=abs(d))
+
+    def _rpc_turn(self, now: float, req: dict) -> dict:
+        """Turn in place by `angle` degrees (positive: counter-clockwise)."""
+        _only(req, "turn", "angle")
+        a = _number(req.get("angle"), "angle", "deg")
+        if a == 0:
+            raise NavError("angle must not be 0; positive turns left (counter-clockwise), negative right.")
+        return self.pilot.drive(now, "turn left" if a > 0 else "turn right", amount=math.radians(abs(a)))
+
+    def _rpc_primitive(self, now: float, req: dict) -> dict:
+        _only(req, "primitive", "name", "continuous")
+        return self.pilot.drive(now, req.get("name"), continuous=req.get("continuous", False))
+
+    def _rpc_settings(self, now: float, req: dict) -> dict:
+        _only(req, "settings", "change")
+        return self.pilot.settings(req.get("change"))
+
+    def _rpc_set_pose(self, now: float, req: dict) -> dict:
+        _only(req, "set_pose", "pose", "cov")
+        if req.get("pose") is None:
+            raise NavError("set_pose needs a pose [x, y, theta] (m and rad, map frame).")
+        return self.pilot.set_pose(now, req["pose"], req.get("cov"))
+
+    def _rpc_localize(self, now: float, req: dict) -> dict:
+        _only(req, "localize")
+        return self.pilot.localize(now)
+
+    def _rpc_save_map(self, now: float, req: dict) -> dict:
+        """Write the map in use as map_server YAML + PGM under the user's maps folder."""
+        _only(req, "save_map", "name")
+        name = check_name(req.get("name", "map"))
+        if "/" in name or "\\" in name or name.startswith("."):
+            raise NavError(f"A map name is a plain name, not a path; got {quote(name, 40)}.")
+        folder = data_dir() / "nav" / self.robot / "maps"
+        folder.mkdir(parents=True, exist_ok=True)
+        yaml_path, pgm = save_map(self.pilot.grid, folder / f"{name}.yaml")
+        return {"yaml": str(yaml_path), "pgm": str(pgm)}
+
+    def _here(self) -> Pose:
+        if not self.pilot.localised:
+            raise NavError("I am not sure where I am, so I cannot save this place; set my position first.")
+        return self.pilot.pose()
+
+    # ---------------------------------------------------------------------- runtime
+    def health(self) -> dict:
+        s = self.pilot.status_message()
+        return {"state": s.state, "localised": s.localised, "cycles": self.cycles, "commands": self.commands,
+                "slowest_cycle_ms": round(self.slowest_cycle * 1000, 1), "holder": self.holder.current}
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=1.0)
+        with self._lock:
+            driving = self.pilot.status().state == "active" or self.pilot.primitives.active
+            self.pilot.stop(self.clock())
+        if driving:
+            self._send(0.0, 0.0)
+
+
+def _number(value: object, name: str, unit: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise NavError(f"{name} must be a finite number in {unit}; got {quote(value, 30)}.")
+    return float(value)
+
+
+# -------------------------------------------------------------------------- command line
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--map", default=str(SIM_MAPS / "apartment.yaml"),
+                   help="map_server YAML of the map (default: the sim apartment's)")
+    p.add_argument("--world", default="apartment", help="world whose named places are read (default apartment)")
+    p.add_argument("--initial-pose", default="charging station",
+                   help="where the robot starts: x,y,theta (m, m, rad) or a place name (default 'charging station')")
+    p.add_argument("--rate", type=float, default=15.0, help="control loop, Hz (10-20; default 15)")
+
+
+def _start_pose(text: str, places: Places) -> Pose:
+    parts = text.split(",")
+    if len(parts) == 3:
+        try:
+            return as_pose([float(v) for v in parts], "--initial-pose")
+        except (ValueError, NavError):
+            pass
+    try:
+        return places.get(text).pose
+    except NavError as exc:
+        raise ValueError(f"--initial-pose must be x,y,theta or a place name: {exc.message}") from None
+
+
+def build(bus: Bus, args: argparse.Namespace) -> NavService:
+    if not args.robot:
+        raise ValueError("--robot is required: the robot to navigate, e.g. pioneer-sim")
+    keys.nav_status(args.robot)   # a ValueError with a sentence for a bad robot name
+    if not 5.0 <= args.rate <= 50.0:
+        raise ValueError(f"--rate must be between 5 and 50 Hz; got {args.rate:g}")
+    try:
+        loaded = load_map(args.map)
+    except NavError as exc:
+        raise ValueError(exc.message) from None
+    try:
+        places = Places.for_robot(args.robot, args.world, loaded.grid.info)
+    except NavError as exc:
+        raise ValueError(exc.message) from None
+    start = _start_pose(args.initial_pose, places)
+    if not loaded.grid.info.contains(start.x, start.y):
+        raise ValueError(f"--initial-pose ({start.x:.2f}, {start.y:.2f}) is outside the map ({loaded.grid.info.bounds()})")
+    return NavService(bus, args.robot, loaded, places, start, rate=args.rate)

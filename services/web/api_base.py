@@ -1,0 +1,136 @@
+"""The Base page's half of the API: send a mobile robot to a place or a point of its map, drive
+it with the thesis's primitives, and keep its named places. Each route is one call to the
+robot's nav service (`keys.nav_rpc`); its refusals reach the page as its sentences.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal
+
+from fastapi import APIRouter, Request
+from pydantic import Field, StrictBool, StrictStr
+
+from asibot import keys
+from asibot.errors import RpcError
+from asibot.nav.primitives import PRIMITIVES
+from asibot.web.api_robots import Number, RobotId, Strict, _known, _run, _web
+
+router = APIRouter(prefix="/api/base")
+
+#: The primitives, and how the page lays out their buttons: as a person faces the way the robot
+#: goes (forward on top, the curves beside it, the exact turns below).
+DRIVES = tuple(PRIMITIVES)
+DRIVE_ROWS = (("curve forward left", "forward", "curve forward right"),
+              ("turn left", "stop", "turn right"),
+              ("curve backward left", "backward", "curve backward right"),
+              ("turn left 90", "turn around", "turn right 90"))
+CHANGES = ("faster", "slower", "wider", "narrower")
+#: Nav answers at once (a goal runs on after the answer); a slow answer is a stuck service.
+NAV_TIMEOUT = 5.0
+
+PlaceName = Annotated[StrictStr, Field(min_length=1, max_length=64, description="a place's name, as the user says it")]
+
+
+class Goal(Strict):
+    """Where to go: a named place, or a point of the map (m, map frame). The robot arrives at a
+    point facing the way it came, unless `theta_deg` says otherwise."""
+    place: PlaceName | None = None
+    x: Number | None = None
+    y: Number | None = None
+    theta_deg: Number | None = None
+
+
+class Drive(Strict):
+    """One primitive; `continuous` goes on until Stop (or an obstacle), else one step of the width."""
+    name: Literal[DRIVES]   # type: ignore[valid-type]
+    continuous: StrictBool = False
+
+
+class Change(Strict):
+    change: Literal[CHANGES]   # type: ignore[valid-type]
+
+
+class NewPlace(Strict):
+    """Save a place where the robot stands now."""
+    name: PlaceName
+    replace: StrictBool = False
+
+
+class Rename(Strict):
+    new_name: PlaceName
+
+
+def config() -> dict:
+    """What the Base page draws its buttons from."""
+    return {"drives": [list(row) for row in DRIVE_ROWS], "changes": list(CHANGES)}
+
+
+def _nav(request: Request, robot: str, verb: str, **body: object) -> dict:
+    web = _web(request)
+    _known(web, robot)
+    return web.motion.bus.call(keys.nav_rpc(robot, verb), {k: v for k, v in body.items() if v is not None},
+                               timeout=NAV_TIMEOUT)
+
+
+@router.get("/{robot}/map", summary="the robot's navigation map (occupancy grid)")
+def nav_map(robot: RobotId, request: Request) -> dict:
+    found = _web(request).fleet.map(robot)
+    if found is None:
+        raise RpcError("unavailable", f"No map from the nav service of {robot!r} yet; is it running "
+                                      f"(`asibot up` starts it in the simulation)?")
+    return found
+
+
+@router.post("/{robot}/goto", summary="go to a named place or to a point of the map")
+async def goto(robot: RobotId, body: Goal, request: Request) -> dict:
+    if (body.place is None) == (body.x is None or body.y is None):
+        raise RpcError("bad_request", "Say where to go: a place, or a point x and y (m) of the map, not both.")
+    if body.place is not None:
+        return await _run(_nav, request, robot, "goto", place=body.place)
+    theta = math.radians(body.theta_deg) if body.theta_deg is not None else _facing(request, robot, body.x, body.y)
+    return await _run(_nav, request, robot, "goto", pose=[float(body.x), float(body.y), theta])
+
+
+def _facing(request: Request, robot: str, x: float, y: float) -> float:
+    """The heading from where the robot is to (x, y): it arrives facing the way it came."""
+    nav = _web(request).fleet.view(_known(_web(request), robot)).get("nav") or {}
+    pose = nav.get("pose")
+    if not pose or math.hypot(x - pose["x"], y - pose["y"]) < 1e-3:
+        return math.radians(pose["theta_deg"]) if pose else 0.0
+    return math.atan2(y - pose["y"], x - pose["x"])
+
+
+@router.post("/{robot}/cancel", summary="cancel the running goal")
+async def cancel(robot: RobotId, request: Request) -> dict:
+    return await _run(_nav, request, robot, "cancel")
+
+
+@router.post("/{robot}/drive", summary="one of the driving primitives, or stop")
+async def drive(robot: RobotId, body: Drive, request: Request) -> dict:
+    return await _run(_nav, request, robot, "primitive", name=body.name, continuous=body.continuous or None)
+
+
+@router.post("/{robot}/settings", summary="faster, slower, wider or narrower")
+async def settings(robot: RobotId, body: Change, request: Request) -> dict:
+    return await _run(_nav, request, robot, "settings", change=body.change)
+
+
+@router.get("/{robot}/places", summary="the robot's named places")
+async def places(robot: RobotId, request: Request) -> dict:
+    return await _run(_nav, request, robot, "places")
+
+
+@router.post("/{robot}/places", summary="save a place where the robot stands")
+async def save_place(robot: RobotId, body: NewPlace, request: Request) -> dict:
+    return await _run(_nav, request, robot, "save_place", name=body.name, replace=body.replace or None)
+
+
+@router.post("/{robot}/places/{name}/rename", summary="rename a place")
+async def rename_place(robot: RobotId, name: str, body: Rename, request: Request) -> dict:
+    return await _run(_nav, request, robot, "rename_place", name=name, new_name=body.new_name)
+
+
+@router.delete("/{robot}/places/{name}", summary="remove a place")
+async def remove_place(robot: RobotId, name: str, request: Request) -> dict:
+    return await _run(_nav, request, robot, "remove_place", name=name)

@@ -1,0 +1,92 @@
+"""The Task Creator's tasks on the bus: other services (the AsTeRICS bridge, voice) launch a
+task by name as the Launcher does, and every robot's users hear how it went.
+
+The web service owns the program runner (one program at a time, with its limits), so it is
+the one that serves `keys.tasks_rpc(...)`; a second runner elsewhere could start a second
+program on the same arm. When a task's program ends, an Event on the robot's `events` says
+how ("Give me the red can: done", or the runner's sentence), for the page, the bridge's
+clients and the spoken feedback alike.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Callable
+
+from asibot import keys
+from asibot.bus import Bus
+from asibot.errors import RpcError, arguments as _only, quote
+from asibot.messages import Event
+from asibot.web.runner import ProgramRunner, RunResult
+from asibot.web.userdata import UserData, UserDataError
+
+log = logging.getLogger("asibot.web.tasks")
+
+
+class TaskDesk:
+    """Serves list / launch / stop / status of the tasks in `data` through `runner`.
+
+    `is_live(robot)` says whether a robot is on the bus (the fleet knows); a task is launched
+    only on a live one."""
+
+    def __init__(self, bus: Bus, data: UserData, runner: ProgramRunner, is_live: Callable[[str], bool]) -> None:
+        self.bus, self.data, self.runner, self.is_live = bus, data, runner, is_live
+        self._events: dict[str, object] = {}
+        for verb in keys.RPC_VERBS_TASKS:
+            bus.serve(keys.tasks_rpc(verb), getattr(self, f"_rpc_{verb}"))
+
+    def launch(self, name: str, robot: str) -> dict:
+        """Start task `name` on `robot` (the Launcher's button does the same)."""
+        if not self.is_live(robot):
+            raise RpcError("unavailable", f"Robot {robot!r} is not connected; start it with `asibot up`.")
+        task = self.data.task(name)
+        path = self.data.program_file(task.program)
+        try:
+            self.runner.start(path, robot, name=task.name)
+        except RuntimeError as exc:
+            raise RpcError("busy", f"{str(exc)[:1].upper()}{str(exc)[1:]}.") from None
+        self.tell(robot, "info", "task_started", f"{task.name}: started")
+        return {"task": task.name, "program": task.program, "robot": robot}
+
+    def finished(self, result: RunResult) -> None:
+        """The runner's `on_exit`: tell the robot's users how the task ended."""
+        if result.robot:
+            text = f"{result.program}: done" if result.ok else f"{result.program}: {result.reason}"
+            self.tell(result.robot, "info" if result.ok else "warning",
+                      "task_done" if result.ok else "task_failed", text)
+
+    def tell(self, robot: str, level: str, code: str, text: str) -> None:
+        try:
+            pub = self._events.get(robot) or self._events.setdefault(
+                robot, self.bus.publisher(keys.events(robot), Event))
+            pub.put(Event(level=level, code=code, text=text))
+        except Exception as exc:   # telling must never break a run or a launch
+            log.warning("could not tell %s about its task: %s", robot, exc)
+
+    # --- the RPC verbs ---------------------------------------------------------------------
+    def _rpc_list(self, req: dict) -> dict:
+        _only(req, "list")
+        return {"tasks": [{"name": t.name, "program": t.program, "words": list(t.words)}
+                          for t in self.data.tasks()]}
+
+    def _rpc_launch(self, req: dict) -> dict:
+        _only(req, "launch", "task", "robot")
+        name, robot = req.get("task"), req.get("robot")
+        if not isinstance(name, str) or not name.strip():
+            raise RpcError("bad_request", f"launch needs the task's name as text; got {quote(name, 30)}.")
+        if not isinstance(robot, str) or not robot:
+            raise RpcError("bad_request", f"launch needs the robot to run on; got {quote(robot, 30)}.")
+        try:
+            return self.launch(name.strip(), robot)
+        except UserDataError as exc:
+            raise RpcError("bad_request", str(exc)) from None
+
+    def _rpc_stop(self, req: dict) -> dict:
+        _only(req, "stop")
+        self.runner.stop("stopped from another program")
+        return {}
+
+    def _rpc_status(self, req: dict) -> dict:
+        _only(req, "status")
+        return self.runner.status()
+
