@@ -1,0 +1,141 @@
+"""The HTTP entry (AsTeRICS-Grid's HTTP actions and live elements) on a loopback port."""
+
+import base64
+import http.client
+import json
+import socket
+
+import pytest
+
+from asibot.testing import wait_until
+
+from asibot.asterics_bridge.servers import Limits
+
+from .harness import OTHER, ROBOT, Bridge
+
+
+@pytest.fixture
+def bridge(memory_bus):
+    b = Bridge(memory_bus, limits=Limits(http_body_bytes=1024, http_header_bytes=2048))
+    yield b
+    b.close()
+
+
+def request(bridge, method, path, body=None, headers=None):
+    conn = http.client.HTTPConnection("127.0.0.1", bridge.servers.http_port, timeout=5)
+    try:
+        conn.request(method, path, body=body, headers=headers or {})
+        r = conn.getresponse()
+        return r.status, dict(r.getheaders()), r.read().decode()
+    finally:
+        conn.close()
+
+
+def raw(bridge, data: bytes) -> bytes:
+    with socket.create_connection(("127.0.0.1", bridge.servers.http_port), timeout=5) as s:
+        s.sendall(data)
+        out = b""
+        while chunk := s.recv(65536):
+            out += chunk
+        return out
+
+
+def test_text_plain_command_as_asterics_grid_sends_it(bridge):
+    status, headers, body = request(bridge, "POST", "/command", "forward", {"Content-Type": "text/plain"})
+    assert (status, body) == (200, "ok: forward, until you say stop\n")
+    assert headers["Access-Control-Allow-Origin"] == "*"
+    assert bridge.nav.requests("primitive") == [{"name": "forward", "continuous": True}]
+    status, _, body = request(bridge, "POST", "/command", "stop")
+    assert (status, body) == (200, "ok: stopped base and arm\n")
+
+
+def test_json_commands(bridge):
+    status, headers, body = request(bridge, "POST", "/command", json.dumps({"command": "grab"}),
+                                    {"Content-Type": "application/json"})
+    assert status == 200 and json.loads(body) == {"ok": True, "text": "holding something"}
+    assert headers["Content-Type"].startswith("application/json")
+    status, _, body = request(bridge, "POST", "/command", json.dumps({"command": "arm up", "robot": OTHER}),
+                              {"Content-Type": "application/json"})
+    assert status == 200 and bridge.other_arm.verbs() == ["stat", "movl"]
+    status, _, body = request(bridge, "POST", "/command", json.dumps({"command": "forwrd"}),
+                              {"Content-Type": "application/json"})
+    assert status == 400 and json.loads(body) == {"ok": False, "code": "not_understood",
+                                                  "error": "unknown command 'forwrd'; did you mean 'forward'?"}
+
+
+def test_cors_preflight(bridge):
+    status, headers, body = request(bridge, "OPTIONS", "/command", headers={
+        "Origin": "https://grid.asterics.eu", "Access-Control-Request-Method": "POST",
+        "Access-Control-Request-Headers": "content-type"})
+    assert status == 204 and body == ""
+    assert headers["Access-Control-Allow-Origin"] == "*"
+    assert "POST" in headers["Access-Control-Allow-Methods"]
+    assert "content-type" in headers["Access-Control-Allow-Headers"]
+
+
+def test_status_for_live_elements(bridge):
+    request(bridge, "POST", "/command", "forward")
+    wait_until(lambda: bridge.dispatcher.board.robot(ROBOT).nav is not None)
+    bridge.event("goal_succeeded", "Arrived at fridge", level="info")
+    wait_until(lambda: bridge.dispatcher.board.robot(ROBOT).last_event is not None)
+    status, headers, body = request(bridge, "GET", "/status")
+    st = json.loads(body)
+    assert status == 200 and headers["Content-Type"].startswith("application/json")
+    assert {"robot", "moving", "pose", "place", "last_event", "battery"} <= set(st)
+    assert st["robot"] == ROBOT and st["moving"] is True and st["last_event"] == "goal reached"
+    assert json.loads(request(bridge, "GET", f"/status?robot={OTHER}")[2])["robot"] == OTHER
+    assert request(bridge, "GET", "/status?robot=a/b")[0] == 400
+
+
+@pytest.mark.parametrize("data, code", [
+    (b"POST /command HTTP/1.1\r\nContent-Length: 999999\r\n\r\n", b"413"),
+    (b"POST /command HTTP/1.1\r\nContent-Length: 5\r\nContent-Type: image/png\r\n\r\n\x89PNG\r", b"415"),
+    (b"POST /command HTTP/1.1\r\nContent-Length: 4\r\n\r\n\xff\xfe\xfd\xfc", b"400"),
+    (b"POST /command HTTP/1.1\r\nContent-Length: 4\r\nContent-Type: application/json\r\n\r\n{{{{", b"400"),
+    (b"POST /command HTTP/1.1\r\nContent-Length: 2\r\nContent-Type: application/json\r\n\r\n[]", b"400"),
+    (b"POST /command HTTP/1.1\r\nTransfer-Encoding: chunked\r\n\r\n5\r\nhello\r\n0\r\n\r\n", b"411"),
+    (b"POST /command HTTP/1.1\r\nContent-Length: -3\r\n\r\n", b"400"),
+    (b"POST /command HTTP/1.1\r\nX-Big: " + b"a" * 5000 + b"\r\n\r\n", b"431"),
+    (b"garbage\r\n\r\n", b"400"),
+    (b"GET /command HTTP/1.1\r\n\r\n", b"405"),
+    (b"GET /nothing HTTP/1.1\r\n\r\n", b"404"),
+])
+def test_bad_http_is_answered_and_moves_nothing(bridge, data, code):
+    reply = raw(bridge, data.replace(b"HTTP/1.1\r\n", b"HTTP/1.1\r\nConnection: close\r\n", 1))
+    assert reply.split(b" ")[1] == code, reply[:200]
+    status, _, body = request(bridge, "POST", "/command", "faster")
+    assert status == 200
+    assert bridge.nav.verbs() == ["settings"]
+
+
+def test_a_huge_body_is_refused_unread(bridge):
+    with socket.create_connection(("127.0.0.1", bridge.servers.http_port), timeout=5) as s:
+        s.sendall(b"POST /command HTTP/1.1\r\nContent-Length: 100000000\r\n\r\n" + b"x" * 65536)
+        assert s.recv(200).split(b" ")[1] == b"413"
+
+
+def test_keep_alive_serves_several_requests(bridge):
+    conn = http.client.HTTPConnection("127.0.0.1", bridge.servers.http_port, timeout=5)
+    try:
+        for text in ("faster", "slower", "status"):
+            conn.request("POST", "/command", body=text)
+            r = conn.getresponse()
+            assert r.status == 200 and r.read().startswith(b"ok")
+    finally:
+        conn.close()
+
+
+def test_a_token_guards_the_network(memory_bus):
+    b = Bridge(memory_bus, token="s3cret")
+    try:
+        status, headers, _ = request(b, "POST", "/command", "forward")
+        assert status == 401 and "WWW-Authenticate" in headers
+        assert request(b, "GET", "/status")[0] == 401
+        assert request(b, "POST", "/command", "forward", {"Authorization": "Bearer wrong"})[0] == 401
+        basic = base64.b64encode(b"asterics:s3cret").decode()
+        assert request(b, "POST", "/command", "faster", {"Authorization": f"Basic {basic}"})[0] == 200
+        assert request(b, "POST", "/command", "forward", {"Authorization": "Bearer s3cret"})[0] == 200
+        assert request(b, "GET", "/status?token=s3cret")[0] == 200
+        assert [v for v, _ in b.nav.calls] == ["settings", "primitive"]
+    finally:
+        b.close()
