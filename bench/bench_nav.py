@@ -3,8 +3,8 @@
 Prints one markdown table. Budgets (DESIGN.md, issue 13): AMCL update with 2000 particles and
 60 beams 10 ms; a global plan across the apartment and on a 20 m x 20 m, 5 cm map 50 ms. The
 references are what a straightforward port would do: the likelihood field one particle at a
-time, Dijkstra with Python's heapq, the controller one trajectory at a time, and the bare
-distance transform under the inflation.
+time, Dijkstra with Python's heapq, the controller one trajectory at a time, the bare
+distance transform under the inflation, and a mapping scan raytraced beam by beam (Bresenham).
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from asibot.nav.geometry import Pose
 from asibot.nav.grid import GridInfo, OccupancyGrid
 from asibot.nav.local import LocalController, arcs
 from asibot.nav.mapfile import load_map
+from asibot.nav.mapping import Mapper
 from asibot.nav.planner import GlobalPlanner
 from asibot.nav.places import Places, world_places_file
 
@@ -114,6 +115,34 @@ def heapq_dijkstra(costmap: Costmap, start: Pose, goal: Pose) -> float:
     return math.inf
 
 
+def bresenham_scan(logodds: np.ndarray, info: GridInfo, pose: Pose, scan: LaserScan, max_range: float) -> None:
+    """The reference mapper update: each beam's cells walked one at a time (Bresenham), misses
+    along the way and a hit at the end, in Python."""
+    r0, c0 = (int(v) for v in info.to_cell(pose.x, pose.y))
+    for i, rng_ in enumerate(scan.ranges):
+        if not math.isfinite(rng_) and not math.isinf(rng_):
+            continue
+        hit = math.isfinite(rng_) and rng_ < scan.range_max and rng_ <= max_range
+        d = min(float(rng_), max_range)
+        a = pose.theta + scan.angle_min + i * scan.angle_increment
+        r1, c1 = (int(v) for v in info.to_cell(pose.x + d * math.cos(a), pose.y + d * math.sin(a)))
+        dr, dc = abs(r1 - r0), abs(c1 - c0)
+        sr, sc = (1 if r1 > r0 else -1), (1 if c1 > c0 else -1)
+        err, r, c = dc - dr, r0, c0
+        while (r, c) != (r1, c1):
+            if 0 <= r < info.height and 0 <= c < info.width:
+                logodds[r, c] -= 0.4
+            e2 = 2 * err
+            if e2 > -dr:
+                err -= dr
+                c += sc
+            if e2 < dc:
+                err += dc
+                r += sr
+        if hit and 0 <= r1 < info.height and 0 <= c1 < info.width:
+            logodds[r1, c1] += 0.85
+
+
 def main() -> None:
     apartment = load_map(MAP).grid
     places = Places(Path("/nonexistent/places.yaml"), world_places_file())
@@ -190,6 +219,28 @@ def main() -> None:
     lethal = (live.costs < 254).astype(np.uint8)
     rows.append(("reference: one cv2.distanceTransform of the same map",
                  p50_ms(lambda: cv2.distanceTransform(lethal, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)), "ms", "-"))
+
+    # mapping: one 360-beam scan matched against the map so far, raytraced and marked (the robot
+    # going back and forth across the living room, 0.25 m a scan, after a first pass)
+    poses = [Pose(1.0 + 0.25 * i, 1.5 + 0.1 * math.sin(i), 0.05 * i) for i in range(13)]
+    scans = [scan_from(apartment, p) for p in poses]
+    mapper = Mapper(poses[0])
+    for p, s in zip(poses, scans):
+        mapper.update(p, s)
+    turn = [len(poses) - 1, 1]
+
+    def mapping_update():
+        i, step = turn
+        if not 0 <= i + step < len(poses):
+            step = -step
+        turn[:] = [i + step, step]
+        assert mapper.update(poses[i + step], scans[i + step])
+    rows.append(("mapping update per scan (360 beams: match in x, y, theta + raytrace + mark)",
+                 p50_ms(mapping_update), "ms", "-"))
+    info = mapper.info
+    rows.append(("reference: the same scan raytraced beam by beam (Bresenham, Python), no matching",
+                 p50_ms(lambda: bresenham_scan(mapper.logodds.copy(), info, poses[6], scans[6],
+                                               mapper.params.max_range), 10), "ms", "-"))
     print_table(rows)
 
 

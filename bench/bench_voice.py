@@ -7,6 +7,13 @@ is the real-time factor), pocketsphinx's decode alone (what our three rejection 
 to it), numpy's FFT resampling of the same audio (the floor of any whole-buffer resampler;
 ours streams), and the bare float32 -> mono decode.
 
+The service rows run `asibot.voice.service` on the in-memory bus (no router) with a Task
+Creator double: each utterance of the corpus is streamed as a browser streams it (100 ms chunks
+of 48 kHz float32 stereo), all but the quiet that ends it; the clock starts when the chunk of
+quiet that ends it is published and stops when the launch request (or the latched estop, for
+"stop") arrives. Beside it: recognising the same utterances alone, and the VAD's hangover
+(the quiet a speaker must leave before an utterance ends, which comes on top).
+
 Run: `.venv/bin/python bench/bench_voice.py`
 """
 
@@ -15,6 +22,7 @@ from __future__ import annotations
 import itertools
 import os
 import shutil
+import argparse
 import subprocess
 import sys
 import tempfile
@@ -23,11 +31,15 @@ from pathlib import Path
 
 import numpy as np
 
+from asibot import keys
+from asibot.bus import Bus
+from asibot.messages import AudioChunk, EStop
+from asibot.voice import service
 from asibot.voice.audio import AudioFormat, Converter, decode, read_wav
 from asibot.voice.grammar import Lexicon, build_grammar
 from asibot.voice.recognizer import Listener, Recognizer
 from asibot.voice.speaker import Speaker
-from asibot.voice.vad import Vad
+from asibot.voice.vad import Vad, VadConfig
 
 from table import print_table, times  # bench/table.py: run as `python bench/<name>.py`
 
@@ -125,6 +137,8 @@ def main() -> None:
         row(f"rebuild: build_grammar + set_grammar, {n} phrases", _rebuild_times(recognizer, words, lex))
     recognizer.set_grammar(build_grammar(ASSIGNED, lex))
 
+    service_rows([(text, x) for text, inside, _, _, x in corpus if inside and text not in ("yes", "no")])
+
     speaker = Speaker()
     row("speaker: synthesize 'Sorry, I did not understand.'",
         times(lambda: speaker.synthesize("Sorry, I did not understand."), 10))
@@ -138,6 +152,69 @@ def main() -> None:
     print_table(ROWS, header=("what", "p50", "p99", "unit", "reference / budget"))
     print()
     print_rates(verdicts)
+
+
+def service_rows(clips: list[tuple[str, np.ndarray]]) -> None:
+    """Utterance end -> launch request (or estop) on the bus, through the whole service."""
+    bus = Bus("bench", "mem://bench-voice")
+    launched: list[float] = []
+    estopped: list[float] = []
+    bus.serve(keys.tasks_rpc("list"), lambda req: {"tasks": [{"name": w, "program": "p.py", "words": [w]}
+                                                             for w in ASSIGNED]})
+    bus.serve(keys.tasks_rpc("launch"), lambda req: launched.append(time.perf_counter()) or {})
+    bus.serve(keys.tasks_rpc("stop"), lambda req: {})
+    bus.announce(keys.driver_alive("asibot-sim"))
+    bus.subscribe(keys.estop("asibot-sim"), EStop, lambda m: estopped.append(time.perf_counter()))
+    args = argparse.Namespace(robot="asibot-sim", confirm=False, answer_seconds=8.0, refresh=2.0, source_timeout=2.0,
+                              quiet=True, voice="en-us", speed=150, local_mic=False, mic_device=None)
+    svc = service.build(Bus("voice", "mem://bench-voice"), args)
+    deadline = time.monotonic() + 10.0
+    while not svc.words():
+        if time.monotonic() > deadline:
+            raise SystemExit("bench_voice: the voice service never learnt the tasks' words")
+        time.sleep(0.01)
+    mic = bus.publisher(keys.voice_audio("web-bench"), AudioChunk)
+    rng = np.random.default_rng(1)
+    ending = VadConfig().hangover + 0.15                     # s of quiet that ends an utterance, and a margin
+
+    def send(x16: np.ndarray) -> None:
+        t48 = np.arange(len(x16) * 3) / 3.0
+        x = np.interp(t48, np.arange(len(x16)), x16.astype(np.float32) / 32768.0)
+        stereo = np.stack([x, x], 1).astype(np.float32)
+        for i in range(0, len(stereo), 4800):
+            mic.put(AudioChunk(data=stereo[i:i + 4800].tobytes(), rate=48000, sample="float32", channels=2))
+
+    def quiet(seconds: float) -> np.ndarray:
+        return (rng.standard_normal(int(seconds * 16000)) * 30).astype(np.int16)
+
+    to_launch, to_stop, alone, missed = [], [], [], 0
+    for text, x in clips:
+        loud = np.flatnonzero(np.abs(x) > 300)
+        x = x[: loud[-1] + 1] if len(loud) else x             # the speech, without the WAV's own quiet end
+        alone.append(svc.recognizer.decode(np.concatenate([quiet(0.3), x, quiet(ending)])).decode_seconds)
+        outbox = estopped if text == "stop" else launched
+        before = len(outbox)
+        send(np.concatenate([quiet(0.5), x]))
+        while svc.streams.queued() > 0:
+            time.sleep(0.002)
+        time.sleep(0.02)                                      # the worker's last chunk
+        t0 = time.perf_counter()
+        send(quiet(ending))
+        deadline = t0 + 2.0
+        while len(outbox) == before and time.perf_counter() < deadline:
+            time.sleep(0.0005)
+        if len(outbox) > before:
+            (to_stop if text == "stop" else to_launch).append(outbox[-1] - t0)
+        else:
+            missed += 1
+    svc.close()
+    bus.close()
+    row(f"service: utterance end -> launch request on the bus ({len(to_launch)} utterances, memory bus)",
+        np.array(to_launch), ref="from the chunk of quiet that ends it")
+    row(f"service: utterance end -> estop latched ('stop', {len(to_stop)} utterances)", np.array(to_stop))
+    row("  reference: recognising the same utterances alone", np.array(alone))
+    ROWS.append(("  reference: the quiet that ends an utterance (VAD hangover)", f"{VadConfig().hangover * 1e3:.0f}",
+                 f"{VadConfig().hangover * 1e3:.0f}", "ms", f"{missed} utterances not recognised (no launch)"))
 
 
 def _rebuild_times(recognizer: Recognizer, words: list[str], lex: Lexicon) -> np.ndarray:

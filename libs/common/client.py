@@ -261,6 +261,20 @@ class NavClient(_Client):
         """Tell localisation where the robot is (x, y, theta in m, m, rad, map frame)."""
         self._call("set_pose", pose=list(pose))
 
+    def map_start(self) -> str:
+        """Start building a new map where the robot stands; drive it (drive, turn, primitive)
+        through every room while it maps. Goals are refused until the map is saved and used."""
+        return self._call("map_start")["text"]
+
+    def map_stop(self) -> str:
+        """Stop mapping; the map is kept to be saved, and the map in use stays."""
+        return self._call("map_stop")["text"]
+
+    def map_save(self, name: str, use: bool = False) -> dict:
+        """Save the map built as <name>.yaml + <name>.pgm (ROS map_server) in the user's maps
+        folder; `use` makes it the map in use at once. {"yaml", "pgm", "text"}."""
+        return self._call("map_save", name=name, use=use or None)
+
 
 def default_robot() -> str:
     """The robot a user program drives: ASIBOT_ROBOT or asibot-sim."""

@@ -18,9 +18,10 @@ RPC_VERBS_CART = (
 )
 RPC_VERBS_NAV = ("goto", "cancel", "result", "status", "places", "save_place", "rename_place", "remove_place",
                  "save_position", "recall_position", "drive", "turn", "primitive", "settings", "set_pose",
-                 "localize", "save_map")
+                 "localize", "save_map", "map_start", "map_stop", "map_save")
 RPC_VERBS_PERCEPTION = ("find",)
 RPC_VERBS_TASKS = ("list", "launch", "stop", "status")
+RPC_VERBS_VOICE = ("status",)
 
 
 def _chunk(value: str, what: str) -> str:
@@ -169,6 +170,41 @@ def tasks_rpc(verb: str) -> str:
     return f"tasks/rpc/{verb}"
 
 
+def voice_audio(source: str) -> str:
+    """Microphone audio for the voice service (`AudioChunk`), one key per source: a web page
+    publishes its microphone as `web-<page id>`; each source is its own stream (own resampler,
+    own voice activity detection), forgotten after 2 s without a chunk."""
+    return f"voice/audio/{_chunk(source, 'audio source')}"
+
+
+def voice_events(source: str) -> str:
+    """What the voice service says about one source's audio (`Event`): a chunk refused and
+    why (`bad_audio`, `format_changed`), audio arriving faster than it is heard (`audio_overflow`),
+    the source forgotten after a silence (`source_forgotten`), too many sources (`too_many_sources`)."""
+    return f"voice/events/{_chunk(source, 'audio source')}"
+
+
+def voice_heard() -> str:
+    """Every utterance the voice service cut from any source, what it heard in it and what it
+    did (`VoiceHeard`): for the Speech tab and the logs."""
+    return "voice/heard"
+
+
+def voice_rpc(verb: str) -> str:
+    """The voice service's verbs: `status` (the words listened for, the sources, the settings)."""
+    if verb not in RPC_VERBS_VOICE:
+        raise ValueError(f"voice verb {verb!r} is not one of {', '.join(RPC_VERBS_VOICE)}")
+    return f"voice/rpc/{verb}"
+
+
+def voice_source_of(key: str) -> str | None:
+    """The source of a `voice/audio/<source>` key; None for any other key."""
+    parts = key.split("/") if isinstance(key, str) else []
+    if len(parts) == 3 and parts[:2] == ["voice", "audio"] and _NAME.match(parts[2]):
+        return parts[2]
+    return None
+
+
 def estop(robot_id: str) -> str:
     return f"{robot(robot_id)}/estop"
 
@@ -190,6 +226,7 @@ ALL_SERVICES = "svc/**"
 ALL_HEALTH = "health/**"
 ALL_DRIVERS = "rb/*/driver/alive"
 ALL_CONTROLLERS = "rb/*/controller/alive/*"
+ALL_VOICE_AUDIO = "voice/audio/*"
 
 
 def every_robot(key_of_robot: Callable[..., str], *names: str) -> str:
@@ -265,7 +302,10 @@ def camera_of(key: str) -> str | None:
 
 def is_command(key: str) -> bool:
     """Whether publishing on `key` can move a robot or change what it may do: its commands,
-    its estop and every RPC. Tools that republish (replay) keep off these near live drivers."""
+    its estop and every RPC, and the voice service's microphone audio (a recorded "stop" or a
+    task's words would act again). Tools that republish (replay) keep off these near live drivers."""
+    if voice_source_of(key) is not None:
+        return True
     try:
         _, rest = parse_robot(key)
     except ValueError:

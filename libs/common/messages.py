@@ -536,7 +536,8 @@ class NavStatus:
     """How navigation goes, for people: `state` is idle, active, succeeded, aborted, canceled or
     preempted (actionlib's); `text` a sentence ("driving to fridge, 3.2 m left"); `goal` x, y,
     theta or empty; `distance` m and `eta` s left; `driving` the running primitive's sentence
-    ("forward, 1.00 m") or empty; `speed` and `width` the primitives' levels."""
+    ("forward, 1.00 m") or empty; `speed` and `width` the primitives' levels; `mapping` how
+    the building of a new map goes ("mapping: 42.0 m² mapped from 120 scans"), empty when none."""
     goal_id: int
     state: str
     text: str
@@ -549,6 +550,7 @@ class NavStatus:
     localised: bool = False
     speed: int = 0
     width: int = 0
+    mapping: str = ""
 
 
 @message
@@ -574,6 +576,39 @@ class Event:
     level: str
     code: str
     text: str
+
+
+@message
+class AudioChunk:
+    """A piece of a microphone's stream for the voice service, on `keys.voice_audio(source)`.
+    `data`: little-endian samples, interleaved when stereo; `rate` Hz (8000 to 48000); `sample`
+    "int16" or "float32" (in [-1, 1]); `channels` 1 or 2. Every chunk says its format, and a
+    source keeps one (a new format is a new source); 20 to 200 ms a chunk, at most 1 s."""
+    data: bytes
+    rate: int
+    sample: str = "int16"
+    channels: int = 1
+
+
+@message
+class VoiceHeard:
+    """One utterance the voice service cut from the audio of `source`, and what it did.
+
+    `text` the phrase as spoken ("give me the red can"), "" when nothing of the grammar was
+    heard; `word` the user's word it stands for, as written; `confidence` 0..1; `seconds` the
+    utterance's length. `action`: launch (the task was started), refused (the Task Creator
+    said no: `reason`), ask (a question waits for yes or no), cancel (no, no answer, or a stop
+    came first), stop (every robot stopped), nothing. `task` the task concerned, `reason` a
+    sentence (why nothing, why refused), `said` what the robot answered aloud ("" for nothing)."""
+    source: str
+    action: str
+    text: str = ""
+    word: str = ""
+    confidence: float = 0.0
+    seconds: float = 0.0
+    task: str = ""
+    reason: str = ""
+    said: str = ""
 
 
 @message

@@ -5,6 +5,7 @@
     asibot nav drive 1.0 | turn 90 | primitive "turn left 90" | stop | cancel
     asibot nav places | save-place "sofa" | rename-place sofa couch | remove-place couch
     asibot nav status
+    asibot nav map start | stop | save home [--use]   # map a new home while driving it
 
 The robot is --robot, else $ASIBOT_ROBOT, else pioneer-sim. Every refusal prints the nav
 service's sentence and exits with 2, as the other commands do.
@@ -33,7 +34,8 @@ def _target(text: str) -> str | list[float]:
 def _show(status: dict) -> str:
     pose = status.get("pose")
     where = f" at ({pose[0]:.2f}, {pose[1]:.2f}, {pose[2]:.2f} rad)" if pose else ""
-    return f"{status['state']}: {status['text']}{where}"
+    mapping = f"\n{status['mapping']}" if status.get("mapping") else ""
+    return f"{status['state']}: {status['text']}{where}{mapping}"
 
 
 def cmd_nav(args: argparse.Namespace) -> int:
@@ -77,6 +79,11 @@ def cmd_nav(args: argparse.Namespace) -> int:
         elif verb == "remove-place":
             base.remove_place(args.name)
             print(f"{robot}: {args.name!r} removed")
+        elif verb == "map":
+            if args.action == "save":
+                print(f"{robot}: {base.map_save(args.name, use=args.use)['text']}")
+            else:
+                print(f"{robot}: {base.map_start() if args.action == 'start' else base.map_stop()}")
     return 0
 
 
@@ -107,4 +114,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     rn.add_argument("new_name")
     rm = verbs.add_parser("remove-place", help="remove a place")
     rm.add_argument("name")
+    mp = verbs.add_parser("map", help="map a new home: start, drive the robot everywhere, save NAME --use")
+    actions = mp.add_subparsers(dest="action", required=True)
+    actions.add_parser("start", help="start a new map where the robot stands (then drive it around)")
+    actions.add_parser("stop", help="stop mapping (the map is kept until saved or a new start)")
+    sv = actions.add_parser("save", help="save the map as NAME.yaml + NAME.pgm in your maps folder")
+    sv.add_argument("name")
+    sv.add_argument("--use", action="store_true", help="localise and navigate on it from now on")
     nav.set_defaults(func=cmd_nav)

@@ -72,6 +72,7 @@ class RobotStatus:
     nav: m.NavStatus | None = None
     nav_at: int = 0                      # our clock (ns) when `nav` came
     odom: m.Odometry | None = None
+    where: m.NavPose | None = None       # nav's pose on the map; the pose people mean
     battery: float | None = None
     estop: bool = False
     last_event: Notice | None = None
@@ -84,7 +85,7 @@ class RobotStatus:
         return o is not None and (abs(o.vx) > MOVING_VX or abs(o.wz) > MOVING_WZ)
 
     def as_json(self, robot: str) -> dict:
-        nav, o = self.nav, self.odom
+        nav, o = self.nav, self.where or self.odom   # the map pose where nav runs, else odometry's
         return {
             "robot": robot,
             "moving": self.moving(),
@@ -114,6 +115,8 @@ class StatusBoard:
         bus.subscribe(keys.every_robot(keys.events), m.Event, self._on_event, with_key=True, maxsize=200)
         bus.subscribe(keys.every_robot(keys.nav_status), m.NavStatus, self._on_nav, with_key=True, maxsize=50)
         bus.subscribe(keys.every_robot(keys.base_odom), m.Odometry, self._on_odom, with_key=True,
+                      maxsize=1, ring=True)
+        bus.subscribe(keys.every_robot(keys.nav_pose), m.NavPose, self._on_pose, with_key=True,
                       maxsize=1, ring=True)
         bus.subscribe(keys.every_robot(keys.base_battery), m.Battery, self._on_battery, with_key=True,
                       maxsize=1, ring=True)
@@ -152,6 +155,9 @@ class StatusBoard:
 
     def _on_odom(self, key: str, odom: m.Odometry) -> None:
         self._update(key, odom=odom)
+
+    def _on_pose(self, key: str, pose: m.NavPose) -> None:
+        self._update(key, where=pose)
 
     def _on_battery(self, key: str, battery: m.Battery) -> None:
         self._update(key, battery=battery.volts)

@@ -9,6 +9,10 @@ simulator. It knows nothing of Zenoh and takes the time as an argument.
 - Where it goes: goals through the `Navigator` (action semantics: `goto` answers a goal id at
   once, a newer goal preempts, `cancel`, `result`), to a named place (`Places`) or a pose.
 - How a person drives it: the thesis's primitives (`Primitives`), closed-loop on odometry.
+- Mapping a new home (`Mapper`): `map_start` builds a new map from the scans while the person
+  drives (primitives only: goals are refused, there is no map to plan on); the pose is then
+  the mapper's. `map_grid` is the map so far; `use_map` switches AMCL, the costmap and the
+  planner to a new map at the robot's pose on it.
 
 Goals and primitives are exclusive: a primitive cancels the running goal and a goal stops the
 running primitive, so one thing at a time drives the base. The emergency stop ends both and
@@ -36,6 +40,7 @@ from asibot.nav.costmap import Costmap
 from asibot.nav.errors import NavError
 from asibot.nav.geometry import Pose, as_pose, wrap
 from asibot.nav.grid import OccupancyGrid
+from asibot.nav.mapping import Mapper, MapperParams
 from asibot.nav.navigator import ABORTED, ACTIVE, CANCELED, PREEMPTED, SUCCEEDED, Command, Navigator, NavStatus
 from asibot.nav.places import Places
 from asibot.nav.primitives import Primitives
@@ -108,6 +113,9 @@ class Pilot:
         self._latest = "goal"
         self._drive_state = "idle"
         self.estopped = False
+        self.mapper_params = MapperParams(resolution=grid.info.resolution)
+        self.mapper: Mapper | None = None   # the latest map being built (kept after map_stop, to save)
+        self.mapping = False
 
     # ------------------------------------------------------------------------- inputs
 
@@ -141,15 +149,25 @@ class Pilot:
 
     @property
     def localised(self) -> bool:
+        if self.mapping:
+            return True          # the map is drawn around where the mapper says the robot is
         est = self.amcl.estimate
         return est is not None and est.std_xy < self.params.localised_std and est.std_theta < self.params.localised_std
 
     def pose(self) -> Pose:
-        """The map pose now (the filter's estimate carried forward by odometry)."""
-        return self.amcl.pose(self._odom.pose) if self._odom is not None else self.amcl.estimate.pose
+        """The map pose now (the filter's estimate, or the mapper's, carried forward by odometry)."""
+        return self._pose_at(self._odom.pose) if self._odom is not None else self.amcl.estimate.pose
+
+    def _pose_at(self, odom: Pose) -> Pose:
+        if self.mapping and self.mapper is not None:
+            return self.mapper.pose(odom)
+        return self.amcl.pose(odom)
 
     def pose_message(self) -> m.NavPose:
         p, est = self.pose(), self.amcl.estimate
+        if self.mapping:
+            return m.NavPose(x=p.x, y=p.y, theta=p.theta, covariance=[0.0] * 9, localised=True,
+                             particles=np.zeros((0, 3), np.float32))
         n = len(self.amcl.poses)
         pick = self._rng.choice(n, size=min(n, self.params.particles_shown), replace=False)
         return m.NavPose(x=p.x, y=p.y, theta=p.theta, covariance=est.covariance.reshape(-1).tolist(),
@@ -168,7 +186,16 @@ class Pilot:
         return m.NavStatus(goal_id=s.goal_id or 0, state=state, text=text, place=s.place,
                            goal=list(s.goal) if s.goal is not None else [], distance=float(s.distance_remaining),
                            eta=float(s.eta), recoveries=s.recoveries, driving=prim.last_text if prim.active else "",
-                           localised=self.localised, speed=prim.settings.speed, width=prim.settings.width)
+                           localised=self.localised, speed=prim.settings.speed, width=prim.settings.width,
+                           mapping=self.mapping_text())
+
+    def mapping_text(self) -> str:
+        """'mapping: 42.0 m² mapped from 120 scans', or how a stopped map waits; '' without one."""
+        if self.mapper is None:
+            return ""
+        if self.mapping:
+            return f"mapping: {self.mapper.summary()}"
+        return f"mapping stopped: {self.mapper.summary()}, not in use (map_save NAME saves it)"
 
     # ----------------------------------------------------------------------- requests
 
@@ -195,6 +222,9 @@ class Pilot:
         return self._goto(now, self.places.recall_position(), "the saved position")
 
     def _goto(self, now: float, goal: Pose, label: str) -> dict:
+        if self.mapping:
+            raise RpcError("busy", "I am mapping, so there is no map to plan on yet. Drive me with the primitives; "
+                                   "save the map (map_save NAME with use) or stop mapping (map_stop) first.")
         if not self.localised:
             raise RpcError("unavailable", "I am not sure where I am, so I cannot plan a way there. Set my "
                                           "position on the map (or start localisation) and try again.")
@@ -278,12 +308,70 @@ class Pilot:
         self._scan_used = False
         return {"text": "looking for where I am: drive me around a little, or wait"}
 
-    def _end_everything(self, now: float, why: str) -> None:
+    # ------------------------------------------------------------------------ mapping
+
+    def map_start(self, now: float) -> dict:
+        """Start a new map where the robot believes it is (its frame is the current one: in a
+        new home, the initial pose). A running goal ends; a running drive goes on."""
+        if self.mapping and self.mapper is not None:
+            raise RpcError("busy", f"I am already mapping ({self.mapper.summary()}); save the map (map_save NAME) "
+                                   "or stop mapping (map_stop) first.")
+        odom = self._fresh_odom(now)
+        if odom is None:
+            raise RpcError("unavailable", "No odometry from the base: is the base driver (or the sim) running?")
+        start = self.pose()
+        self._end_goal(now, "mapping started")
+        self.mapper = Mapper(start, self.mapper_params, odom=odom.pose)
+        self.mapping = True
+        self._scan_used = False
+        text = "mapping: drive me slowly through every room and back to the start, then save the map"
+        self.on_event("info", "mapping_started", text)
+        return {"text": text, "pose": list(start)}
+
+    def map_stop(self, now: float) -> dict:
+        """Stop mapping; the map is kept to be saved until the next map_start. Localisation
+        goes back to the map in use."""
+        if not self.mapping or self.mapper is None:
+            raise RpcError("bad_request", "I am not mapping; start with map_start.")
+        self.mapping = False
+        self._scan_used = False
+        return {"text": self.mapping_text()}
+
+    def map_grid(self) -> OccupancyGrid:
+        """The map built so far (during mapping or after map_stop), as an occupancy grid."""
+        if self.mapper is None:
+            raise NavError("Nothing has been mapped: start mapping (map_start) and drive me around first.")
+        if self.mapper.stats.scans == 0:
+            raise RpcError("unavailable", "No scan has been mapped yet: is the scan (the perception service) running?")
+        return self.mapper.to_grid()
+
+    def use_map(self, now: float, grid: OccupancyGrid) -> dict:
+        """Localise and navigate on `grid` from now on, starting at the robot's pose on it (the
+        mapper's, when a map was built: also after map_stop, when AMCL went back to the old
+        map). Refused, changing nothing, when that pose is off the map."""
+        pose = self.mapper.pose(self._odom.pose) if self.mapper is not None and self._odom is not None else self.pose()
+        amcl = Amcl(grid, self.amcl.params, seed=int(self._rng.integers(2 ** 31)))
+        amcl.set_pose(pose, (0.05 ** 2, 0.05 ** 2, 0.05 ** 2))   # NavError when the pose is off the map
+        self._end_goal(now, "the map changed")
+        old = self.navigator.costmap
+        self.grid, self.amcl = grid, amcl
+        self.navigator.costmap = Costmap(grid, old.footprint, old.params)
+        self.places.info = grid.info
+        self.mapping, self.mapper = False, None
+        self._scan_used = False
+        text = f"now on the new map ({grid.info.bounds()}), at {pose}"
+        self.on_event("info", "map_changed", text)
+        return {"text": text, "pose": list(pose)}
+
+    def _end_goal(self, now: float, why: str) -> None:
         if self.navigator.status.state == ACTIVE:
             self.navigator.cancel(now)
             if why:
                 self.navigator.status.text = f"stopped: {why}"
             self._tell_goal_end()
+
+    def _end_everything(self, now: float, why: str) -> None:
+        self._end_goal(now, why)
         if self.primitives.active:
             self.primitives.stop(f"stopped: {why}" if why else "stopped")
             self._driving, self._drive_state = False, CANCELED
@@ -306,7 +394,12 @@ class Pilot:
         if scan is not None and not self._scan_used:
             self._scan_used = True
             self._scan_odom = odometry_at(self._history, scan.stamp)
-            if self._scan_odom is not None:
+            if self._scan_odom is not None and self.mapping and self.mapper is not None:
+                try:
+                    self.mapper.update(self._scan_odom, scan)
+                except NavError:
+                    pass         # a scan the mapper cannot use is left out; the next one comes
+            elif self._scan_odom is not None:
                 self.amcl.update(self._scan_odom, scan)
         if self.estopped:
             return None
@@ -321,7 +414,7 @@ class Pilot:
             return Command(0.0, 0.0)
         # the costmap takes a scan only where it was taken (a scan that cannot be placed waits)
         placed = scan if self._scan_odom is not None else None
-        scan_pose = self.amcl.pose(self._scan_odom) if placed is not None else None
+        scan_pose = self._pose_at(self._scan_odom) if placed is not None else None
         cmd = self.navigator.step(now, self.pose(), placed, odom, localised=self.localised, scan_pose=scan_pose)
         self._tell_goal_end()
         return cmd

@@ -6,7 +6,9 @@ Out: velocity commands on `keys.base_cmd_vel` as the robot's base controller (it
 itself, `asibot.ownership`, and every Twist carries its identity); `nav/pose` (every cycle
 the filter updated, and at `pose_hz`), `nav/map` (latched), `nav/path` (when it changes),
 `nav/status` (at `status_hz` and on every change), user Events; the RPC verbs of
-`keys.RPC_VERBS_NAV` on `keys.nav_rpc`.
+`keys.RPC_VERBS_NAV` on `keys.nav_rpc`. While mapping (`map_start`), `nav/map` carries the
+map being built every `map_period` s; `map_save` writes it under the user's maps folder and,
+with `use`, makes it the map in use.
 
 The work is in `Pilot` (localisation, goals, primitives, places); this class runs its
 control loop at `rate` Hz and moves messages between it and the bus. Nothing is sent to the
@@ -36,6 +38,7 @@ from asibot.timing import Ticker
 
 from asibot.nav.errors import NavError
 from asibot.nav.geometry import Pose, as_pose
+from asibot.nav.grid import OccupancyGrid
 from asibot.nav.mapfile import LoadedMap, load_map, save_map
 from asibot.nav.pilot import Pilot
 from asibot.nav.places import Places, check_name
@@ -51,11 +54,12 @@ class NavService(Service):
     """Navigation of one robot on the bus."""
 
     def __init__(self, bus: Bus, robot: str, loaded: LoadedMap, places: Places, start: Pose, *,
-                 rate: float = 15.0, pose_hz: float = 5.0, status_hz: float = 4.0,
+                 rate: float = 15.0, pose_hz: float = 5.0, status_hz: float = 4.0, map_period: float = 2.0,
                  clock: Callable[[], float] = time.monotonic, seed: int | None = None,
                  run_loop: bool = True) -> None:
         self.bus, self.robot, self.loaded, self.clock = bus, robot, loaded, clock
         self.rate, self.pose_period, self.status_period = rate, 1.0 / pose_hz, 1.0 / status_hz
+        self.map_period = map_period
         self._lock = threading.Lock()      # the pilot: the loop and the RPC handlers take turns
         self.pilot = Pilot(loaded.grid, places, start, on_event=self._event, seed=seed)
         self._pub_cmd = bus.publisher(keys.base_cmd_vel(robot), m.Twist)
@@ -74,7 +78,7 @@ class NavService(Service):
             bus.serve(keys.nav_rpc(robot, verb), self._handler(verb))
         self.cycles = self.commands = 0
         self.slowest_cycle = 0.0
-        self._last_pose = self._last_status = -math.inf
+        self._last_pose = self._last_status = self._last_map = -math.inf
         self._status_sent: tuple | None = None
         self._path_sent: object = None
         self._stop = threading.Event()
@@ -120,6 +124,11 @@ class NavService(Service):
             cmd = self.pilot.tick(now)
             pose = self.pilot.pose_message() if now - self._last_pose >= self.pose_period else None
             path = self.pilot.status().path
+            building = (self.pilot.map_grid() if self.pilot.mapping and self.pilot.mapper.stats.scans
+                        and now - self._last_map >= self.map_period else None)
+        if building is not None:
+            self._last_map = now
+            self._latch_map(building, "mapping")
         if cmd is not None:
             self._send(cmd.vx, cmd.wz)
         if pose is not None:
@@ -153,12 +162,13 @@ class NavService(Service):
             self._status_sent, self._last_status = what, now
             self._pub_status.put(msg)
 
-    def _latch_map(self) -> None:
-        grid = self.loaded.grid
+    def _latch_map(self, grid: OccupancyGrid | None = None, name: str = "") -> None:
+        """Latch the map in use (or `grid`, the map being built, under `name`)."""
+        if grid is None:
+            grid, name = self.loaded.grid, self.loaded.yaml_path.stem
         o = grid.info.origin
         self.bus.latch(keys.nav_map(self.robot), m.NavMap(
-            resolution=grid.info.resolution, origin=[o.x, o.y, o.theta], data=grid.data,
-            name=self.loaded.yaml_path.stem))
+            resolution=grid.info.resolution, origin=[o.x, o.y, o.theta], data=grid.data, name=name))
 
     # -------------------------------------------------------------------------- RPC
     def _handler(self, verb: str) -> Callable[[dict], dict]:
@@ -258,13 +268,49 @@ class NavService(Service):
     def _rpc_save_map(self, now: float, req: dict) -> dict:
         """Write the map in use as map_server YAML + PGM under the user's maps folder."""
         _only(req, "save_map", "name")
-        name = check_name(req.get("name", "map"))
-        if "/" in name or "\\" in name or name.startswith("."):
+        yaml_path, pgm = save_map(self.pilot.grid, self._map_path(req.get("name", "map")))
+        return {"yaml": str(yaml_path), "pgm": str(pgm)}
+
+    def _map_path(self, name: object) -> Path:
+        """data_dir()/nav/<robot>/maps/<name>.yaml (the folder made); NavError for a path."""
+        if name is None or (isinstance(name, str) and not name.strip()):
+            raise NavError("A map needs a name, for example 'home' (it is saved as home.yaml and home.pgm).")
+        if isinstance(name, str) and ("/" in name or "\\" in name or name.strip().startswith(".")):
             raise NavError(f"A map name is a plain name, not a path; got {quote(name, 40)}.")
+        name = check_name(name)
         folder = data_dir() / "nav" / self.robot / "maps"
         folder.mkdir(parents=True, exist_ok=True)
-        yaml_path, pgm = save_map(self.pilot.grid, folder / f"{name}.yaml")
-        return {"yaml": str(yaml_path), "pgm": str(pgm)}
+        return folder / f"{name}.yaml"
+
+    def _rpc_map_start(self, now: float, req: dict) -> dict:
+        """Start building a new map from the scans while the robot is driven (goals are refused)."""
+        _only(req, "map_start")
+        return self.pilot.map_start(now)
+
+    def _rpc_map_stop(self, now: float, req: dict) -> dict:
+        """Stop mapping; the map is kept to be saved, and the map in use is shown again."""
+        _only(req, "map_stop")
+        reply = self.pilot.map_stop(now)
+        self._latch_map()
+        return reply
+
+    def _rpc_map_save(self, now: float, req: dict) -> dict:
+        """Save the map built (while mapping or after map_stop) as <name>.yaml + .pgm; with `use`,
+        localise and navigate on it from now on (mapping ends)."""
+        _only(req, "map_save", "name", "use")
+        use = req.get("use", False)
+        if not isinstance(use, bool):
+            raise NavError(f"use must be true or false; got {quote(use, 30)}.")
+        path = self._map_path(req.get("name"))
+        summary = self.pilot.mapper.summary() if self.pilot.mapper is not None else ""
+        yaml_path, pgm = save_map(self.pilot.map_grid(), path)
+        reply = {"yaml": str(yaml_path), "pgm": str(pgm), "text": f"saved the map {path.stem!r} ({summary})"}
+        if use:
+            loaded = load_map(yaml_path)     # what was written, exactly as a restart would read it
+            reply["text"] += "; " + self.pilot.use_map(now, loaded.grid)["text"]
+            self.loaded = loaded
+            self._latch_map()
+        return reply
 
     def _here(self) -> Pose:
         if not self.pilot.localised:
@@ -274,7 +320,8 @@ class NavService(Service):
     # ---------------------------------------------------------------------- runtime
     def health(self) -> dict:
         s = self.pilot.status_message()
-        return {"state": s.state, "localised": s.localised, "cycles": self.cycles, "commands": self.commands,
+        return {"state": s.state, "localised": s.localised, "mapping": s.mapping, "cycles": self.cycles,
+                "commands": self.commands,
                 "slowest_cycle_ms": round(self.slowest_cycle * 1000, 1), "holder": self.holder.current}
 
     def close(self) -> None:

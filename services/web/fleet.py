@@ -75,7 +75,7 @@ class RobotView:
             "base": None if self.odom is None else {
                 "x": round(self.odom.x, 3), "y": round(self.odom.y, 3),
                 "theta_deg": round(math.degrees(self.odom.theta), 1)},
-            "nav": nav_json(self.nav_pose, self.nav_status, self.nav_path, self.scan),
+            "nav": nav_json(self.nav_pose, self.nav_status, self.nav_path, self.scan, self.nav_map),
             "events": list(self.events),
         }
 

@@ -41,11 +41,14 @@ def scan_points(scan: LaserScan, x: float, y: float, theta: float) -> list[list[
 
 
 def nav_json(pose: NavPose | None, status: NavStatus | None, path: NavPath | None,
-             scan: LaserScan | None) -> dict[str, Any] | None:
-    """The live part of the Base page; None while the robot has no nav service."""
+             scan: LaserScan | None, grid: NavMap | None = None) -> dict[str, Any] | None:
+    """The live part of the Base page; None while the robot has no nav service. `map` names the
+    map nav uses now (its stamp), so the page fetches it again when it changes (a new map
+    while mapping, every few seconds)."""
     if pose is None and status is None:
         return None
-    out: dict[str, Any] = {"pose": None, "particles": [], "scan": [], "path": [], "status": None}
+    out: dict[str, Any] = {"pose": None, "particles": [], "scan": [], "path": [], "status": None,
+                           "map": str(grid.stamp) if grid is not None else ""}
     if pose is not None:
         out["pose"] = {"x": round(pose.x, 3), "y": round(pose.y, 3),
                        "theta_deg": round(math.degrees(pose.theta), 1), "localised": pose.localised}
@@ -59,7 +62,8 @@ def nav_json(pose: NavPose | None, status: NavStatus | None, path: NavPath | Non
                          "place": status.place, "goal": [round(v, 3) for v in status.goal[:2]],
                          "distance": round(status.distance, 2), "eta": round(status.eta, 1),
                          "recoveries": status.recoveries, "driving": status.driving,
-                         "localised": status.localised, "speed": status.speed, "width": status.width}
+                         "localised": status.localised, "speed": status.speed, "width": status.width,
+                         "mapping": status.mapping}
     return out
 
 
@@ -67,6 +71,6 @@ def map_json(grid: NavMap) -> dict[str, Any]:
     """The occupancy grid for a canvas: cells row by row from the map's lower-left corner,
     int8 as ROS has them (0 free, 100 occupied, -1 unknown), base64-encoded."""
     data = np.ascontiguousarray(grid.data, dtype=np.int8)
-    return {"name": grid.name, "resolution": grid.resolution, "origin": list(grid.origin[:2]),
+    return {"name": grid.name, "stamp": str(grid.stamp), "resolution": grid.resolution, "origin": list(grid.origin[:2]),
             "width": int(data.shape[1]), "height": int(data.shape[0]),
             "cells": base64.b64encode(data.tobytes()).decode("ascii")}

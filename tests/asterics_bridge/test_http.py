@@ -87,6 +87,18 @@ def test_status_for_live_elements(bridge):
     assert request(bridge, "GET", "/status?robot=a/b")[0] == 400
 
 
+def test_status_tells_the_pose_on_the_map_once_nav_has_one(bridge):
+    """Odometry starts where the robot was switched on; people mean the place on the map."""
+    import math
+    from asibot import keys
+    from asibot import messages as m
+    bridge.bus.publisher(keys.base_odom(ROBOT), m.Odometry).put(m.Odometry(x=0.0, y=0.0, theta=0.0))
+    wait_until(lambda: json.loads(request(bridge, "GET", "/status")[2])["pose"] is not None)
+    bridge.bus.publisher(keys.nav_pose(ROBOT), m.NavPose).put(
+        m.NavPose(x=3.25, y=1.5, theta=math.pi / 2, covariance=[0.0] * 9, localised=True))
+    wait_until(lambda: json.loads(request(bridge, "GET", "/status")[2])["pose"] == {"x": 3.25, "y": 1.5, "theta": 90.0})
+
+
 @pytest.mark.parametrize("data, code", [
     (b"POST /command HTTP/1.1\r\nContent-Length: 999999\r\n\r\n", b"413"),
     (b"POST /command HTTP/1.1\r\nContent-Length: 5\r\nContent-Type: image/png\r\n\r\n\x89PNG\r", b"415"),

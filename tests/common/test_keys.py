@@ -63,8 +63,9 @@ def test_status_without_a_router_says_so(monkeypatch, capsys):
 
 def test_commands_are_told_apart_from_state():
     for key in (keys.arm_command("r"), keys.gripper_command("r"), keys.base_cmd_vel("r"), keys.estop("r"),
-                keys.cart_rpc("r", "movl"), keys.driver_rpc("r", "reset_fault"), keys.nav_rpc("r", "goto")):
+                keys.cart_rpc("r", "movl"), keys.driver_rpc("r", "reset_fault"), keys.nav_rpc("r", "goto"),
+                keys.voice_audio("web-1")):
         assert keys.is_command(key), key
     for key in (keys.arm_state("r"), keys.base_odom("r"), keys.events("r"), keys.health("sim", "r"),
-                keys.service("sim", "r"), keys.camera_depth("r", "front"), "rb/r/rpcx"):
+                keys.service("sim", "r"), keys.camera_depth("r", "front"), "rb/r/rpcx", keys.voice_heard()):
         assert not keys.is_command(key), key

@@ -31,6 +31,9 @@ def test_every_registered_message_round_trips():
         m.NavPath(goal_id=3, points=np.zeros((2, 2), np.float32), length=1.5),
         m.NavStatus(goal_id=3, state="active", text="driving to fridge, 3.2 m left", place="fridge",
                     goal=[1.0, 2.0, 0.0], distance=3.2, eta=8.0, speed=2, width=3),
+        m.AudioChunk(data=b"\x00\x01" * 160, rate=16000),
+        m.VoiceHeard(source="web-1", action="launch", text="drink", word="drink", confidence=0.8,
+                     task="Drink water", said="Starting Drink water."),
     ]
     assert {type(s).__name__ for s in samples} == set(m.REGISTRY)
     for msg in samples:

@@ -46,6 +46,7 @@ class MapView {
     this.background = el('canvas', { width: g.width, height: g.height });
     this.background.getContext('2d').putImageData(image, 0, 0);
     this.grid = g;
+    this.stamp = g.stamp;
     this.canvas.width = g.width * PX_PER_CELL;
     this.canvas.height = g.height * PX_PER_CELL;
     this.draw();
@@ -65,6 +66,11 @@ class MapView {
 
   update(nav, places) {
     this.live = nav;
+    // nav changed its map (one being built while mapping, or a new one in use): fetch it again
+    if (nav && nav.map && this.grid && nav.map !== this.stamp && !this.loading) {
+      this.loading = true;
+      this.load().catch((e) => notify(e.message)).finally(() => { this.loading = false; });
+    }
     if (places) this.places = places;
     if (!this.frame) this.frame = requestAnimationFrame(() => { this.frame = 0; this.draw(); });
   }
@@ -121,6 +127,7 @@ function statusText(robot) {
   let text = s.text ? s.text[0].toUpperCase() + s.text.slice(1) : s.state;
   if (s.state === 'active' && s.eta) text += `, about ${Math.ceil(s.eta)} s`;
   if (!s.localised) text += '. I am not sure where I am.';
+  if (s.mapping) text += ` (${s.mapping[0].toUpperCase()}${s.mapping.slice(1)})`;
   return text;
 }
 

@@ -1,0 +1,273 @@
+"""The voice service: `python -m asibot.voice --robot asibot-sim [--confirm] [--local-mic]`.
+
+In: microphone audio on `keys.voice_audio(<source>)` (`AudioChunk`; a web page publishes its
+microphone there as `web-<page id>`) and, with `--local-mic`, the robot's own microphone; the
+Task Creator's tasks (`keys.tasks_rpc("list")`, every `--refresh` s: their words are the
+grammar, with stop, yes and no); the robot's events (how a task ended); which robots have a
+live driver (`keys.ALL_DRIVERS`).
+Out: `keys.tasks_rpc("launch")` for a task word, and for "stop" the latched emergency stop of
+every robot with a live driver and `keys.tasks_rpc("stop")`; `keys.voice_heard()` for every
+utterance (what was heard, what was done); `keys.voice_events(<source>)` when a source's audio
+is refused; spoken feedback with espeak-ng (`--quiet`: logged instead).
+
+Threads: chunks are checked and queued on the bus's thread (`streams.Streams`), heard on the
+streams' worker, and acted on by a commands thread, except "stop", which is done at once on
+the worker, so it never waits behind a slow launch. docs/voice.md, "The service".
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import queue
+import threading
+import time
+
+from asibot import keys, messages, runtime
+from asibot.bus import Bus
+from asibot.errors import RpcError, Unavailable, arguments
+from asibot.estop import who
+from asibot.messages import AudioChunk, EStop, Event, VoiceHeard
+from asibot.voice.commands import STOP, Commands, Outcome, Stopped, Transcript
+from asibot.voice.errors import GrammarError
+from asibot.voice.grammar import FIXED_WORDS
+from asibot.voice.recognizer import Recognizer, Result
+from asibot.voice.speaker import Speaker
+from asibot.voice.streams import FORGET_AFTER, Streams
+
+NAME = "voice"
+DEFAULT_ROBOT = "asibot-sim"
+#: Timeout of a launch or stop call, and of the list of tasks, s.
+CALL_TIMEOUT, LIST_TIMEOUT = 3.0, 1.0
+#: Utterances waiting to be acted on at most (each is a phrase someone said: a handful).
+MAX_WAITING = 16
+
+log = logging.getLogger("asibot.voice")
+
+
+class BusRobots:
+    """`commands.Robots` on the bus: launch on `robot` through the Task Creator; stop by engaging
+    the latched emergency stop of every robot whose driver is alive (what the page's red button
+    does: the drivers stop at once, whatever moves the robot) and stopping the running task."""
+
+    def __init__(self, bus: Bus, robot: str, timeout: float = CALL_TIMEOUT) -> None:
+        self.bus, self.robot, self.timeout = bus, robot, timeout
+        self._lock = threading.Lock()
+        self._live: set[str] = set()
+        bus.watch(keys.ALL_DRIVERS, self._on_driver)
+
+    def _on_driver(self, key: str, alive: bool) -> None:
+        robot = keys.robot_of(key)
+        if robot:
+            with self._lock:
+                (self._live.add if alive else self._live.discard)(robot)
+
+    def live(self) -> list[str]:
+        with self._lock:
+            return sorted(self._live)
+
+    def launch(self, task: str) -> None:
+        try:
+            self.bus.call(keys.tasks_rpc("launch"), {"task": task, "robot": self.robot}, timeout=self.timeout)
+        except Unavailable:
+            raise Unavailable("The Task Creator is not running, so no task can start.") from None
+
+    def stop(self) -> Stopped:
+        robots = self.live()
+        for robot in robots:
+            self.bus.latch(keys.estop(robot), EStop(engaged=True, reason='"stop" said to the voice service',
+                                                    by=who("voice")))
+        problems = []
+        try:
+            self.bus.call(keys.tasks_rpc("stop"), timeout=self.timeout)
+        except Unavailable:
+            pass                                     # no Task Creator: no task of its runs
+        except RpcError as exc:
+            problems.append(f"The task could not be stopped: {exc.message}")
+        return Stopped(tuple(robots), tuple(problems))
+
+    def tasks(self) -> list:
+        tasks = self.bus.call(keys.tasks_rpc("list"), timeout=LIST_TIMEOUT).get("tasks")
+        if not isinstance(tasks, list):
+            raise RpcError("internal", "The Task Creator's list of tasks is not a list.")
+        return tasks
+
+
+class VoiceService(runtime.Service):
+    def __init__(self, bus: Bus, robot: str, speaker: object, *, confirm: bool = False, answer_seconds: float = 8.0,
+                 refresh: float = 2.0, source_timeout: float = FORGET_AFTER,
+                 recognizer: Recognizer | None = None) -> None:
+        self.bus, self.robot, self.speaker, self.refresh_period = bus, robot, speaker, refresh
+        self.recognizer = recognizer or Recognizer()
+        self.grammar = self.recognizer.grammar
+        self.tasks_problem = "The Task Creator was not asked yet."
+        self.robots = BusRobots(bus, robot)
+        self.commands = Commands(self.robots, speaker, confirm=confirm, answer_seconds=answer_seconds)
+        self.mic = None
+        self._asked_by = ""
+        self._stop = threading.Event()
+        self._waiting: queue.Queue = queue.Queue(MAX_WAITING)
+        self._heard = bus.publisher(keys.voice_heard(), VoiceHeard)
+        self.streams = Streams(self.recognizer, self._on_result, self._on_notice, forget_after=source_timeout)
+        bus.subscribe(keys.ALL_VOICE_AUDIO, AudioChunk, self._on_chunk, with_key=True, on_reject=self._on_bad_chunk)
+        bus.subscribe(keys.events(robot), Event, self.commands.on_event)
+        bus.serve(keys.voice_rpc("status"), self._status)
+        self._threads = [threading.Thread(target=fn, name=name, daemon=True)
+                         for fn, name in ((self._act, "voice-commands"), (self._housekeeping, "voice-tasks"))]
+        for t in self._threads:
+            t.start()
+
+    # --- audio in ---------------------------------------------------------------------------
+    def _on_chunk(self, key: str, chunk: AudioChunk) -> None:
+        source = keys.voice_source_of(key)
+        if source:
+            self.streams.put(source, chunk.data, chunk.rate, chunk.sample, chunk.channels)
+
+    def _on_bad_chunk(self, key: str, error: Exception) -> None:
+        source = keys.voice_source_of(key)
+        if source:
+            self._on_notice(source, "warning", "bad_audio", f"The audio chunk was refused: {error}.")
+
+    def _on_notice(self, source: str, level: str, code: str, text: str) -> None:
+        (log.info if level == "info" else log.warning)("voice: %s: %s", source, text)
+        self.bus.put_raw(keys.voice_events(source), messages.encode(Event(level=level, code=code, text=text)))
+
+    # --- what was heard ---------------------------------------------------------------------
+    def _on_result(self, source: str, result: Result) -> None:
+        """On the streams' worker: "stop" at once, the rest in order on the commands thread."""
+        if result.heard is not None and result.heard.word == STOP:
+            self._publish(source, result, self.commands.hear(result.heard))
+            return
+        try:
+            self._waiting.put_nowait((source, result, self.commands.ticket()))
+        except queue.Full:
+            self._publish(source, result, Outcome("nothing", reason="Still busy with what was said before; "
+                                                                    "say it again."))
+
+    def _act(self) -> None:
+        while not self._stop.is_set():
+            try:
+                source, result, ticket = self._waiting.get(timeout=0.2)
+            except queue.Empty:
+                continue
+            self._publish(source, result, self.commands.hear(result.heard, result.reason, ticket))
+
+    def _publish(self, source: str, result: Result | None, outcome: Outcome) -> None:
+        heard = result.heard if result is not None else None
+        if outcome.action == "ask":
+            self._asked_by = source
+        msg = VoiceHeard(source=source, action=outcome.action, text=heard.text if heard else "",
+                         word=heard.word if heard else "", confidence=heard.confidence if heard else 0.0,
+                         seconds=result.seconds if result is not None else 0.0, task=outcome.task,
+                         reason=outcome.reason, said=outcome.said)
+        log.info("voice: %s: heard %r -> %s %s%s", source or "-", msg.text, msg.action, msg.task,
+                 f" ({msg.reason})" if msg.reason else "")
+        self._heard.put(msg)
+
+    # --- the words, the question's time -----------------------------------------------------
+    def _housekeeping(self) -> None:
+        next_refresh = time.monotonic()
+        while not self._stop.is_set():
+            if time.monotonic() >= next_refresh:
+                self.refresh()
+                next_refresh = time.monotonic() + self.refresh_period
+            expired = self.commands.expire()
+            if expired is not None:
+                self._publish(self._asked_by, None, expired)
+            self._stop.wait(0.1)
+
+    def refresh(self) -> None:
+        """Ask the Task Creator for the tasks; listen for their words if they changed."""
+        try:
+            words = self.commands.set_tasks(self.robots.tasks())
+            grammar = self.recognizer.set_words(words, skip_unknown=True)
+        except (RpcError, GrammarError) as exc:
+            problem = f"{exc} Keeping the {len(self.grammar.phrases) - len(FIXED_WORDS)} words heard before."
+            if problem != self.tasks_problem:
+                log.warning("voice: cannot update the words: %s", problem)
+            self.tasks_problem = problem
+            return
+        if grammar.key != self.grammar.key or self.tasks_problem:
+            listed = ", ".join(repr(w) for w in grammar.phrases.values() if w not in FIXED_WORDS)
+            log.info("voice: listening for %s and %s", listed or "no task words", ", ".join(FIXED_WORDS))
+            for word, why in grammar.refused.items():
+                log.warning("voice: the word %r is left out: %s", word, why)
+        self.grammar, self.tasks_problem = grammar, ""
+
+    def words(self) -> list[str]:
+        """The tasks' words listened for, as written."""
+        return [w for w in self.grammar.phrases.values() if w not in FIXED_WORDS]
+
+    # --- runtime.Service --------------------------------------------------------------------
+    def _status(self, req: dict) -> dict:
+        arguments(req, "status")
+        return {"robot": self.robot, "words": self.words(), "fixed": list(FIXED_WORDS),
+                "refused": dict(self.grammar.refused), "tasks": self.tasks_problem or "ok",
+                "sources": self.streams.sources(), "confirm": self.commands.confirm, "pending": self.commands.pending,
+                "live_robots": self.robots.live()}
+
+    def health(self) -> dict:
+        return {"robot": self.robot, "words": len(self.words()), "refused": len(self.grammar.refused),
+                "tasks": self.tasks_problem or "ok", "sources": len(self.streams.sources()),
+                "queued_s": round(self.streams.queued(), 2), "pending": self.commands.pending,
+                **self.commands.counters, **{f"audio_{k}": v for k, v in self.streams.counters.items()},
+                **(self.mic.health() if self.mic is not None else {})}
+
+    def close(self) -> None:
+        self._stop.set()
+        if self.mic is not None:
+            self.mic.close()
+        self.streams.close()
+        for t in self._threads:
+            t.join(1.0)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--confirm", action="store_true",
+                   help="ask 'Shall I start <task>? Say yes or no.' before launching a task heard")
+    p.add_argument("--answer-seconds", type=float, default=8.0, help="s to wait for yes or no (default 8)")
+    p.add_argument("--refresh", type=float, default=2.0, help="s between two looks at the tasks' words (default 2)")
+    p.add_argument("--source-timeout", type=float, default=FORGET_AFTER,
+                   help=f"s without audio after which a source is forgotten (default {FORGET_AFTER:g})")
+    p.add_argument("--quiet", action="store_true", help="log the spoken feedback instead of speaking it")
+    p.add_argument("--voice", default="en-us", help="espeak-ng voice (default en-us)")
+    p.add_argument("--speed", type=int, default=150, help="espeak-ng words per minute (default 150)")
+    p.add_argument("--local-mic", action="store_true", default=os.environ.get("ASIBOT_VOICE_LOCAL_MIC") == "1",
+                   help="also listen to this machine's microphone (sounddevice; needs the PortAudio library: "
+                        "`sudo apt-get install libportaudio2`); default off, or ASIBOT_VOICE_LOCAL_MIC=1")
+    p.add_argument("--mic-device", default=None,
+                   help="the input device for --local-mic, by number or name (`python -m sounddevice` lists them)")
+
+
+def build(bus: Bus, args: argparse.Namespace) -> VoiceService:
+    robot = args.robot or DEFAULT_ROBOT
+    try:
+        keys.robot(robot)
+    except ValueError as exc:
+        raise ValueError(f"--robot: {exc}") from None
+    for name, value, low, high in (("--answer-seconds", args.answer_seconds, 1.0, 60.0),
+                                   ("--refresh", args.refresh, 0.05, 60.0),
+                                   ("--source-timeout", args.source_timeout, 0.2, 60.0)):
+        if not low <= value <= high:
+            raise ValueError(f"{name} must be between {low:g} and {high:g} s, not {value:g}")
+    try:
+        speaker: object = Transcript() if args.quiet else Speaker(voice=args.voice, speed=args.speed)
+    except ValueError as exc:
+        raise ValueError(f"--voice / --speed: {exc}") from None
+    if isinstance(speaker, Speaker) and not speaker.available:
+        log.warning("voice: espeak-ng is not installed (`sudo apt-get install espeak-ng`); the feedback is only logged")
+        speaker = Transcript()
+    if args.local_mic:
+        from asibot.voice.mic import LocalMic, sounddevice_module
+        sounddevice_module()                  # refused before anything starts when PortAudio is missing
+    service = VoiceService(bus, robot, speaker, confirm=args.confirm, answer_seconds=args.answer_seconds,
+                           refresh=args.refresh, source_timeout=args.source_timeout)
+    if args.local_mic:
+        device = int(args.mic_device) if args.mic_device and args.mic_device.isdigit() else args.mic_device
+        try:
+            service.mic = LocalMic(service.streams.put, device)
+        except ValueError:
+            service.close()
+            raise
+    return service
