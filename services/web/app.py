@@ -33,6 +33,7 @@ from asibot.web.motion import Motion
 from asibot.web.runner import ProgramRunner
 from asibot.web.tasks_bus import TaskDesk
 from asibot.web.userdata import UserData
+from asibot.web.voice_relay import MicError, VoiceRelay
 
 STATIC = Path(__file__).resolve().parent / "static"
 #: Largest request body, bytes; uploads have their own, larger limits.
@@ -53,6 +54,7 @@ class Web:
     live: Live
     cameras: Cameras
     tasks: TaskDesk
+    voice: VoiceRelay
 
 
 class BodyLimit:
@@ -119,12 +121,19 @@ def create_app(web: Web) -> FastAPI:
         sender = asyncio.create_task(web.live.drain(page))
         try:
             while True:
-                await _on_page_message(web, page, await socket.receive_text())
+                message = await socket.receive()
+                if message["type"] == "websocket.disconnect":
+                    break
+                if message.get("bytes") is not None:
+                    _on_page_sound(web, page, message["bytes"])
+                elif message.get("text") is not None:
+                    await _on_page_message(web, page, message["text"])
         except WebSocketDisconnect:
             pass
         finally:
             web.live.detach(page)
             sender.cancel()
+            _stop_listening(page)
             if page.holding:  # a closed tab must not leave a hold-to-move running
                 await asyncio.to_thread(_stop_quietly, web, page.holding)
 
@@ -143,6 +152,24 @@ def _stop_quietly(web: Web, robot: str) -> None:
         log.info("stop of %s after a hold: %s", robot, exc)
 
 
+def _stop_listening(page) -> None:
+    if page.mic is not None:
+        page.mic.close()
+    page.mic, page.mic_rate = None, None
+
+
+def _on_page_sound(web: Web, page, data: bytes) -> None:
+    """A frame of the page's microphone: on to the voice service. A bad frame stops the
+    listening with the sentence (a broken page must not flood the voice service or itself)."""
+    if page.mic_rate is None:
+        return    # frames still on their way after the page stopped listening
+    try:
+        web.voice.chunk(page.id, page.mic_rate, data)
+    except MicError as exc:
+        _stop_listening(page)
+        page.offer(json.dumps({"type": "mic-stopped", "text": str(exc)}))
+
+
 async def _on_page_message(web: Web, page, text: str) -> None:
     """Hold-to-move over the socket: `hold` beats while a button is held, `release` on let go."""
     try:
@@ -151,7 +178,15 @@ async def _on_page_message(web: Web, page, text: str) -> None:
     except (ValueError, KeyError, TypeError):
         await page.socket.send_text(json.dumps({"type": "refused", "text": "The page sent a message the server does not understand."}))
         return
-    if kind == "hold":
+    if kind == "mic":             # the page starts listening (rate: Hz) or stops (rate: null)
+        _stop_listening(page)
+        if msg.get("rate") is not None:
+            try:
+                page.mic = web.voice.start(page.id, msg.get("rate"))
+                page.mic_rate = msg["rate"]
+            except MicError as exc:
+                page.offer(json.dumps({"type": "refused", "text": str(exc)}))
+    elif kind == "hold":
         robot = msg.get("robot")
         try:
             if robot not in web.fleet.ids():

@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import secrets
 import threading
 from typing import Any, Callable
 
@@ -31,6 +32,9 @@ class Page:
         self.socket = socket
         self.outbox: asyncio.Queue[str] = asyncio.Queue(QUEUE_LIMIT)
         self.holding: str | None = None   # the robot this page streams hold-to-move to
+        self.id = secrets.token_hex(4)      # names its microphone's stream for the voice service
+        self.mic_rate: int | None = None    # Hz, while the page listens
+        self.mic: Any = None                # the subscription to what voice says of its audio
 
     def offer(self, text: str) -> bool:
         try:
@@ -89,6 +93,7 @@ class Live:
         """A new page: it first gets every robot, then the changes."""
         page = Page(socket)
         self.pages.add(page)
+        page.offer(json.dumps({"type": "hello", "page": page.id}))
         page.offer(json.dumps({"type": "robots", "robots": self.views()}))
         return page
 

@@ -26,6 +26,7 @@ from asibot.web.motion import Motion
 from asibot.web.runner import ProgramRunner, RunResult
 from asibot.web.tasks_bus import TaskDesk
 from asibot.web.userdata import UserData, default_root
+from asibot.web.voice_relay import VoiceRelay
 
 NAME = "web"
 
@@ -62,7 +63,7 @@ class WebService(runtime.Service):
             stop_robot=lambda robot: _stop_quietly(motion, robot))
         tasks = TaskDesk(bus, data, runner, is_live=lambda robot: robot in self.fleet.ids())
         self.web = Web(fleet=self.fleet, motion=motion, data=data, runner=runner, live=live,
-                       cameras=Cameras(bus), tasks=tasks)
+                       cameras=Cameras(bus), tasks=tasks, voice=VoiceRelay(bus, live.send))
         self.app = create_app(self.web)
         tls: dict = {}
         if lan:

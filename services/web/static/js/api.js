@@ -37,6 +37,7 @@ export const state = {
   robots: new Map(),          // id -> the server's view of the robot
   chosen: localStorage.getItem('asibot.robot') || null,
   feed: 'connecting',          // connecting | live | lost
+  page: null,                  // this page's id on the server (names its microphone's stream)
 };
 
 export function onChange(fn) { listeners.add(fn); return () => listeners.delete(fn); }
@@ -65,7 +66,9 @@ export function connectFeed() {
   };
   socket.onmessage = (event) => {
     const msg = JSON.parse(event.data);
-    if (msg.type === 'robots') {
+    if (msg.type === 'hello') {
+      state.page = msg.page;
+    } else if (msg.type === 'robots') {
       state.robots = new Map(msg.robots.map((r) => [r.id, r]));
       pickDefault();
       changed('robots');
@@ -80,6 +83,11 @@ export function connectFeed() {
 
 export function sendLive(message) {
   if (socket && socket.readyState === WebSocket.OPEN) socket.send(JSON.stringify(message));
+}
+
+// Raw bytes (the microphone's frames); dropped while the connection is down, as live sound is.
+export function sendSound(buffer) {
+  if (socket && socket.readyState === WebSocket.OPEN) socket.send(buffer);
 }
 
 function connected(r) { return r.driver || r.controller; }

@@ -1,7 +1,46 @@
-// Speech tab: the words and phrases that launch tasks. Typing a word works now; recognising it
-// from the microphone comes with the voice access of a later release.
-import { api } from '../api.js';
+// Speech tab: the words and phrases that launch tasks, and the microphone: listen, say a
+// task's word, and see what the voice service heard and did (it only listens for the words
+// given to tasks, and for stop, yes and no).
+import { api, onMessage } from '../api.js';
+import { listening, onListening, startListening, stopListening } from '../microphone.js';
 import { attempt, el, notify } from '../ui.js';
+
+const HEARD_KEPT = 8;
+const heard = [];   // newest first, kept while the page is open
+
+function describe(h) {
+  const said = h.text ? `“${h.text}”` : 'Something I do not know';
+  const did = {
+    launch: `started ${h.task}`, refused: `${h.task} refused: ${h.reason}`, ask: `asked about ${h.task}`,
+    cancel: `${h.task || 'nothing'} canceled`, stop: 'every robot stopped', nothing: h.reason || 'nothing done',
+  }[h.action] || h.action;
+  const text = `${said}: ${did}`;
+  return /[.!?]$/.test(text) ? text : `${text}.`;
+}
+
+function micPanel() {
+  const button = el('button', { type: 'button', class: 'primary capture', 'aria-pressed': String(listening()) });
+  const state = el('p', { role: 'status', class: 'big' });
+  const list = el('ul', { class: 'events', 'aria-label': 'What was heard' });
+  const show = (on, why) => {
+    button.setAttribute('aria-pressed', String(on));
+    button.textContent = on ? 'Stop listening' : 'Listen to the microphone';
+    state.textContent = on ? 'Listening: say a task\'s word, or "stop".' : (why ? `Not listening: ${why}` : 'Not listening.');
+  };
+  const draw = () => list.replaceChildren(...(heard.length ? heard.map((h) => el('li', { class: `event ${h.action === 'nothing' ? '' : 'info'}` }, describe(h)))
+    : [el('li', { class: 'muted' }, 'Nothing heard yet.')]));
+  button.addEventListener('click', () => (listening() ? stopListening() : attempt(startListening)));
+  const offListen = onListening(show);
+  const offHeard = onMessage((msg) => {
+    if (msg.type === 'heard') { heard.unshift(msg); heard.length = Math.min(heard.length, HEARD_KEPT); draw(); }
+    if (msg.type === 'voice' && msg.level !== 'info') notify(msg.text);
+  });
+  show(listening(), '');
+  draw();
+  const panel = el('section', { class: 'panel', 'aria-label': 'Microphone' }, el('h2', {}, 'Microphone'),
+    el('div', { class: 'row' }, button), state, el('h3', {}, 'Heard'), list);
+  return { panel, unmount: () => { offListen(); offHeard(); } };
+}
 
 export default {
   id: 'speech',
@@ -25,12 +64,15 @@ export default {
       return r;
     }, (r) => `"${r.word}" recorded.`);
     word.addEventListener('keydown', (e) => { if (e.key === 'Enter') add(); });
-    root.replaceChildren(el('section', { class: 'panel', 'aria-label': 'Speech' },
-      el('h2', {}, 'Words and phrases'),
-      el('p', {}, 'Type the word or phrase a person will say to launch a task. Give it to a task on the Assigner page.'),
-      el('div', { class: 'row' }, word, el('button', { type: 'button', class: 'primary', onclick: add }, 'Record word')),
-      list));
+    const mic = micPanel();
+    root.replaceChildren(el('div', { class: 'columns' },
+      el('section', { class: 'panel', 'aria-label': 'Speech' },
+        el('h2', {}, 'Words and phrases'),
+        el('p', {}, 'Type the word or phrase a person will say to launch a task. Give it to a task on the Assigner page; then say it with the microphone on to check that it is heard.'),
+        el('div', { class: 'row' }, word, el('button', { type: 'button', class: 'primary', onclick: add }, 'Record word')),
+        list),
+      mic.panel));
     refresh().catch((e) => notify(e.message));
-    return {};
+    return { unmount: mic.unmount };
   },
 };

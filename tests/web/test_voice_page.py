@@ -1,0 +1,114 @@
+"""The page's microphone: a task launched by saying its word, with chromium's fake microphone
+playing a phrase spoken by espeak-ng (the voice service hears it through the page, the web
+server and the bus, as it would a person's voice), and a phrase it does not know launching
+nothing."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import subprocess
+import urllib.request
+import wave
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from asibot import keys
+from asibot.messages import Event, VoiceHeard
+from asibot.testing import Inbox, wait_until
+
+from .conftest import CHROMIUM, CHROMIUM_ARGS, _stack, screenshot
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
+ROBOT = "asibot-sim"
+
+
+def spoken(folder: Path, text: str) -> Path:
+    """`text` by espeak-ng between two seconds of silence (chromium plays the file in a loop):
+    the voice activity detection sees one utterance a loop."""
+    raw = folder / "raw.wav"
+    subprocess.run(["espeak-ng", "-v", "en-us", "-s", "140", "-w", str(raw), text], check=True, capture_output=True)
+    with wave.open(str(raw)) as w:
+        rate, speech = w.getframerate(), np.frombuffer(w.readframes(w.getnframes()), np.int16)
+    quiet = np.zeros(2 * rate, np.int16)
+    out = folder / f"{text.replace(' ', '_')}.wav"
+    with wave.open(str(out), "wb") as w:
+        w.setnchannels(1)
+        w.setsampwidth(2)
+        w.setframerate(rate)
+        w.writeframes(np.concatenate([quiet, speech, quiet]).tobytes())
+    return out
+
+
+def http(stack, method: str, path: str, body: dict | None = None) -> dict:
+    req = urllib.request.Request(stack.web_url.rstrip("/") + path, method=method,
+                                 data=None if body is None else json.dumps(body).encode(),
+                                 headers={"Content-Type": "application/json"})
+    with urllib.request.urlopen(req, timeout=10) as reply:
+        return json.load(reply)
+
+
+@pytest.fixture(scope="module")
+def kitchen_voice(tmp_path_factory):
+    stack = _stack(tmp_path_factory.mktemp("voice"), ["kinematics-asibot-sim", "voice"],
+                   ["sim/asibot-sim", "kinematics/asibot-sim", "voice/asibot-sim"])
+    http(stack, "PUT", "/api/programs/say_hello", {"text": "print('hello from a spoken task')\n"})
+    http(stack, "POST", "/api/words", {"text": "give me the red can"})
+    http(stack, "PUT", "/api/tasks/Red%20can", {"program": "say_hello", "words": ["give me the red can"], "icon": "can.svg"})
+    # the voice service asks the Task Creator for the tasks' words every few seconds
+    wait_until(lambda: "give me the red can" in json.dumps(stack.bus.call(keys.voice_rpc("status"), timeout=5)),
+               20, interval=0.5, message="the voice service never learnt the task's words")
+    yield stack
+    stack.stop()
+
+
+@contextlib.contextmanager
+def listening(stack, folder: Path, phrase: str):
+    """A browser whose microphone says `phrase` in a loop, listening on the Speech tab; yields
+    the page and what the bus heard (VoiceHeard) and told (the robot's events) meanwhile."""
+    from playwright.sync_api import sync_playwright
+    heard, events = Inbox(), Inbox()
+    subs = [stack.bus.subscribe(keys.voice_heard(), VoiceHeard, heard),
+            stack.bus.subscribe(keys.events(ROBOT), Event, events)]
+    wav = spoken(folder, phrase)
+    errors: list[str] = []
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=[
+            *CHROMIUM_ARGS, "--use-fake-ui-for-media-stream", "--use-fake-device-for-media-stream",
+            f"--use-file-for-fake-audio-capture={wav}", "--autoplay-policy=no-user-gesture-required"])
+        try:
+            page = browser.new_page(viewport={"width": 1366, "height": 900})
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(stack.web_url + "#speech")
+            page.wait_for_selector("body[data-ready=true]")
+            page.get_by_role("button", name="Listen to the microphone").click()
+            page.get_by_text("Listening: say a task's word").wait_for(timeout=10000)
+            yield page, heard, events
+        finally:
+            browser.close()
+            for sub in subs:
+                sub.close()
+    assert not errors, errors
+
+
+def test_a_task_is_launched_by_saying_its_word_into_the_page(kitchen_voice, tmp_path):
+    with listening(kitchen_voice, tmp_path, "give me the red can") as (page, heard, events):
+        wait_until(lambda: any(h.action == "launch" for h in heard.all()), 60, interval=0.2,
+                   message=f"heard: {[(h.action, h.text, h.reason) for h in heard.all()]}")
+        launched = next(h for h in heard.all() if h.action == "launch")
+        assert launched.task == "Red can" and launched.source.startswith("web-")
+        wait_until(lambda: any(e.code == "task_done" and e.text == "Red can: done" for e in events.all()), 30)
+        page.get_by_text("“give me the red can”: started Red can.").first.wait_for(timeout=10000)
+        screenshot(page, "speech-heard")
+        page.get_by_role("button", name="Stop listening").click()
+        page.get_by_text("Not listening.").wait_for(timeout=5000)
+
+
+def test_a_phrase_it_does_not_know_launches_nothing(kitchen_voice, tmp_path):
+    with listening(kitchen_voice, tmp_path, "what a lovely morning it is") as (page, heard, events):
+        wait_until(lambda: len(heard.all()) >= 2, 60, interval=0.2, message="nothing was cut from the audio")
+        assert all(h.action == "nothing" for h in heard.all()), [(h.action, h.text) for h in heard.all()]
+        assert not any(e.code == "task_started" for e in events.all())
+        page.locator(".events li", has_text="Something I do not know").first.wait_for(timeout=10000)
