@@ -54,14 +54,17 @@ def http(stack, method: str, path: str, body: dict | None = None) -> dict:
 def kitchen_voice(tmp_path_factory):
     stack = _stack(tmp_path_factory.mktemp("voice"), ["kinematics-asibot-sim", "voice"],
                    ["sim/asibot-sim", "kinematics/asibot-sim", "voice/asibot-sim"])
-    http(stack, "PUT", "/api/programs/say_hello", {"text": "print('hello from a spoken task')\n"})
-    http(stack, "POST", "/api/words", {"text": "give me the red can"})
-    http(stack, "PUT", "/api/tasks/Red%20can", {"program": "say_hello", "words": ["give me the red can"], "icon": "can.svg"})
-    # the voice service asks the Task Creator for the tasks' words every few seconds
-    wait_until(lambda: "give me the red can" in json.dumps(stack.bus.call(keys.voice_rpc("status"), timeout=5)),
-               20, interval=0.5, message="the voice service never learnt the task's words")
-    yield stack
-    stack.stop()
+    try:    # a failed set-up must not leave the stack running under the rest of the suite
+        http(stack, "PUT", "/api/programs/say_hello", {"text": "print('hello from a spoken task')\n"})
+        http(stack, "POST", "/api/words", {"text": "give me the red can"})
+        http(stack, "PUT", "/api/tasks/Red%20can",
+             {"program": "say_hello", "words": ["give me the red can"], "icon": "can.svg"})
+        # the voice service asks the Task Creator for the tasks' words every few seconds
+        wait_until(lambda: "give me the red can" in json.dumps(stack.bus.call(keys.voice_rpc("status"), timeout=5)),
+                   20, interval=0.5, message="the voice service never learnt the task's words")
+        yield stack
+    finally:
+        stack.stop()
 
 
 @contextlib.contextmanager
