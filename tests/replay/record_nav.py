@@ -21,8 +21,9 @@ from pathlib import Path
 from asibot import keys
 from asibot.client import NavClient
 from asibot.recording.reader import iter_messages
-from asibot.recording.writer import LeanWriter
 from asibot.testing import Stack, wait_until
+
+from fixture import write_fixture   # tests/replay/fixture.py, beside this script
 
 ROOT = Path(__file__).resolve().parents[2]
 ROBOT = "pioneer-sim"
@@ -51,21 +52,12 @@ def main() -> int:
         finally:
             stack.stop()
         [session] = (Path(folder) / "recordings").glob("*.mcap")
-        FIXTURE.parent.mkdir(parents=True, exist_ok=True)
-        with open(FIXTURE, "wb") as f:
-            writer = LeanWriter(f, chunk_size=8 << 20, level=19)     # small in git
-            writer.start("", "asibot replay fixture: the Pioneer driving in the apartment")
-            channels: dict[str, int] = {}
-            # from the first command to the robot standing still again, plus a second either side
-            records = [r for r in iter_messages(session) if r.key in KEEP]
-            moving = [r.log_time for r in records if r.key == keys.base_cmd_vel(ROBOT)]
-            first, last = moving[0] - 1_000_000_000, moving[-1] + 1_000_000_000
-            for rec in records:
-                if first <= rec.log_time <= last:
-                    if rec.key not in channels:
-                        channels[rec.key] = writer.register_channel(rec.key, "msgpack")
-                    writer.add_message(channels[rec.key], rec.log_time, rec.payload, rec.log_time)
-            writer.finish()
+        # from the first command to the robot standing still again, plus a second either side
+        records = [r for r in iter_messages(session) if r.key in KEEP]
+        moving = [r.log_time for r in records if r.key == keys.base_cmd_vel(ROBOT)]
+        first, last = moving[0] - 1_000_000_000, moving[-1] + 1_000_000_000
+        write_fixture(FIXTURE, "asibot replay fixture: the Pioneer driving in the apartment",
+                      (r for r in records if first <= r.log_time <= last))
     print(f"wrote {FIXTURE} ({FIXTURE.stat().st_size} bytes)")
     return 0
 

@@ -16,7 +16,8 @@ from pathlib import Path
 
 from asibot import keys
 from asibot.recording.reader import iter_messages
-from asibot.recording.writer import LeanWriter
+
+from fixture import write_fixture   # tests/replay/fixture.py, beside this script
 
 ROOT = Path(__file__).resolve().parents[2]
 E2E = ROOT / "tests" / "e2e" / "conftest.py"  # the end-to-end tests' `asibot up`: Stack, EXAMPLES
@@ -48,17 +49,7 @@ def main() -> int:
         finally:
             stack.stop()
         [session] = (Path(folder) / "recordings").glob("*.mcap")
-        FIXTURE.parent.mkdir(parents=True, exist_ok=True)
-        with open(FIXTURE, "wb") as f:
-            writer = LeanWriter(f, chunk_size=8 << 20, level=19)     # small in git
-            writer.start("", "asibot replay fixture")
-            channels: dict[str, int] = {}
-            for rec in iter_messages(session):
-                if rec.key in KEEP:
-                    if rec.key not in channels:
-                        channels[rec.key] = writer.register_channel(rec.key, "msgpack")
-                    writer.add_message(channels[rec.key], rec.log_time, rec.payload, rec.log_time)
-            writer.finish()
+        write_fixture(FIXTURE, "asibot replay fixture", (r for r in iter_messages(session) if r.key in KEEP))
     print(f"wrote {FIXTURE} ({FIXTURE.stat().st_size} bytes)")
     return 0
 
