@@ -6,6 +6,9 @@ Rows (each beside a reference measured in the same run):
 - arm state from the driver to the page, p50/p99, beside the driver to a plain bus subscriber;
 - jog press (pointer down on a hold-to-move button) to the first arm command, p50/p99, beside a
   Python program's movjv call to the first arm command;
+- handheld pointer (the Pointer tab, a simulated phone's tilt): Forward pressed (Space, the
+  dead-man toggled on) to the first arm command, and a tilt report to the first arm command
+  that follows it, p50/p99, beside a Python program's `pointer` call to the first arm command;
 - page weight and load time, beside the npm packages' share.
 
 Times in the browser and in this process are both the machine's wall clock (the browser's
@@ -36,8 +39,10 @@ from asibot import keys  # noqa: E402
 from asibot.client import CartesianClient  # noqa: E402
 from asibot.messages import ArmCommand, ArmState  # noqa: E402
 from asibot.testing import Stack, wait_until  # noqa: E402
+from asibot.web.pointer import PointerSettings  # noqa: E402
 
 ROBOT = "asibot-sim"
+BEAT_MS = PointerSettings().beat_ms
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
 
@@ -156,6 +161,7 @@ def main() -> None:
             csub.close()
             rows.append(("jog press to first arm command p50", "ms", pct(jog, 50), "movjv from Python p50", pct(reference, 50), ""))
             rows.append(("jog press to first arm command p99", "ms", pct(jog, 99), "movjv from Python p99", pct(reference, 99), ""))
+            rows += pointer_rows(page, bus, client, n_jogs)
             client.close()
         finally:
             browser.close()
@@ -163,6 +169,56 @@ def main() -> None:
     print_table(rows, ("what", "unit", "value", "reference", "reference value", "budget"))
     print(f"\n(samples: {len(to_page)} arm states, {len(jog)} jog presses; median of the page lag "
           f"{statistics.median(to_page) if to_page else float('nan'):.1f} ms)")
+
+
+def pointer_rows(page, bus, client: CartesianClient, n: int) -> list[tuple]:
+    """The Pointer tab with a phone that reports its tilt every 20 ms: Forward pressed to the
+    first arm command; a tilt report to the first arm command after it (the page sends one
+    report a beat); a Python `pointer` call to the first arm command."""
+    commands: list[float] = []
+    sub = bus.subscribe(keys.arm_command(ROBOT), ArmCommand, lambda m: commands.append(time.time() * 1000))
+    page.evaluate("""() => { window.__reports = [];
+        setInterval(() => { window.dispatchEvent(new DeviceOrientationEvent('deviceorientation', { alpha: 0, beta: 0, gamma: 0 }));
+                            window.__reports.push(performance.timeOrigin + performance.now()); }, 20);
+        window.__keys = [];
+        document.addEventListener('keydown', (e) => { if (e.key === ' ') window.__keys.push(performance.timeOrigin + performance.now()); }, true); }""")
+    page.goto(page.url.split("#")[0] + "#pointer")
+    page.wait_for_selector("text=Motion control")
+    for name in ("Phone tilt", "Tap the dead-man on and off", "Dead-man: off"):
+        page.get_by_role("button", name=name, exact=True).focus()
+        page.keyboard.press("Space")
+    press, report, reference = [], [], []
+    for _ in range(n):
+        wait_until(lambda: _idle(client), timeout=10)
+        commands.clear()
+        page.get_by_role("button", name="Forward", exact=True).focus()
+        page.keyboard.down("Space")
+        wait_until(lambda: commands, timeout=5)
+        page.wait_for_timeout(300)
+        page.keyboard.up("Space")
+        pressed = page.evaluate("window.__keys")[-1]
+        press.append(commands[0] - pressed)
+        reports = page.evaluate("window.__reports")
+        # each command after the first follows the latest report sent before it
+        for c in commands[1:6]:
+            before = [r for r in reports if r <= c]
+            if before:
+                report.append(c - before[-1])
+        page.wait_for_timeout(400)
+    for _ in range(n):
+        wait_until(lambda: _idle(client), timeout=10)
+        commands.clear()
+        s = time.time() * 1000
+        bus.call(keys.cart_rpc(ROBOT, "pointer"), {"deadman": True, "direction": "forward", "pitch": 90.0}, timeout=5)
+        wait_until(lambda: commands, timeout=5)
+        reference.append(commands[0] - s)
+        bus.call(keys.cart_rpc(ROBOT, "pointer"), {"deadman": False}, timeout=5)
+        time.sleep(0.3)
+    sub.close()
+    return [("pointer: Forward press to first arm command p50", "ms", pct(press, 50), "pointer from Python p50", pct(reference, 50), ""),
+            ("pointer: Forward press to first arm command p99", "ms", pct(press, 99), "pointer from Python p99", pct(reference, 99), ""),
+            ("pointer: tilt report to arm command p50", "ms", pct(report, 50), "the page's beat", float(BEAT_MS), ""),
+            ("pointer: tilt report to arm command p99", "ms", pct(report, 99), "", "", "")]
 
 
 def _answers(client: CartesianClient) -> bool:

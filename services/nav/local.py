@@ -57,6 +57,8 @@ class LocalParams:
     final_decel_fraction: float = 0.6  # plan to stop using this share of the deceleration
     min_rotate_wz: float = 0.15
     creep_speed: float = 0.1      # m/s at most where only the bare footprint fits
+    min_progress_vx: float = 0.02  # m/s and rad/s: slower than both, a chosen way is standing still
+    min_progress_wz: float = 0.05
 
 
 @dataclass
@@ -186,6 +188,16 @@ class LocalController:
             # DWA's deadlock: nothing forward scores better than standing still; turning
             # toward the path (which arcs cannot score, as they do not move) opens a way
             return self._out(Control(0.0, self._turn(heading_err, w0), "moving", "turning toward the path", remaining), pose)
+        if abs(V[k]) < p.min_progress_vx and abs(W[k]) < p.min_progress_wz:
+            # Standing still won on points: from rest the window reaches only a few cm, and
+            # the first step into the inflation around a doorway or a table costs more than
+            # those cm gain, so the robot would wait there for ever (seen for 20 s and more
+            # in the sim apartment). Standing still is never a way to the goal: take the best
+            # way that moves, or say the way is blocked, so the navigator replans or recovers.
+            moving = ok & (V >= p.min_progress_vx)
+            if not moving.any():
+                return self._out(Control(0.0, 0.0, "blocked", self._blocked_text(pose, costmap), remaining), pose)
+            k = int(np.argmin(np.where(moving, score, np.inf)))
         return self._out(Control(float(V[k]), float(W[k]), "moving", "", remaining), pose)
 
     def _spacing(self) -> float:

@@ -53,6 +53,10 @@ class NavParams:
     lost_timeout: float = 2.0
     blocked_lookahead: float = 2.5     # m of path ahead checked against new obstacles
     nominal_speed: float = 0.35        # m/s for the ETA before the robot has moved
+    #: A periodic replan takes a new way only if it is at most this much longer than what is
+    #: left of the current one (m, or that share of it, whichever is more).
+    switch_margin: float = 0.5
+    switch_fraction: float = 0.1
     results_kept: int = 50
 
 
@@ -180,14 +184,18 @@ class Navigator:
         if self._recovery is not None:
             return self._recover(now, pose, label)
         # planning
-        if self._need_plan or now - self._last_plan >= self.params.replan_period or self._path_blocked(pose):
+        forced = self._need_plan or self._path_blocked(pose)
+        if forced or now - self._last_plan >= self.params.replan_period:
             try:
                 path = self.planner.plan(self.costmap, pose, self.status.goal, label)  # type: ignore[arg-type]
             except NavError as exc:
                 return self._abort(f"could not reach {label}: {exc.message}")
             except Unreachable as exc:
                 return self._start_recovery(now, pose, label, exc.message.rstrip("."))
-            self._set_path(now, path, pose)
+            if forced or self._better(path, pose):
+                self._set_path(now, path, pose)
+            else:
+                self._last_plan = now
         ctl = self.controller.compute(pose, velocity, self.costmap)
         self.status.distance_remaining = ctl.remaining
         if ctl.status == "arrived":
@@ -225,6 +233,20 @@ class Navigator:
         self._need_plan = False
         if self._progress_mark[1] is None and pose is not None:
             self._progress_mark = (now, pose, path.length)
+
+    def _better(self, path: Path, pose: Pose) -> bool:
+        """Whether a periodic replan should replace the path being followed (which is still
+        free): only when it is not much longer than what is left of it. Without this the robot
+        turned back and forth between the two ways around the kitchen table, as chairs seen a
+        moment ago made one or the other a little dearer."""
+        current = self.status.path
+        if current is None:
+            return True
+        pts = current.points
+        i = int(np.argmin(np.hypot(pts[:, 0] - pose.x, pts[:, 1] - pose.y)))
+        seg = np.hypot(*np.diff(pts[i:], axis=0).T) if len(pts) - i > 1 else np.zeros(0)
+        left = float(seg.sum() + math.hypot(pts[i, 0] - pose.x, pts[i, 1] - pose.y))
+        return path.length <= left + max(self.params.switch_margin, self.params.switch_fraction * left)
 
     def _path_blocked(self, pose: Pose) -> bool:
         path = self.status.path

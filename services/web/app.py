@@ -112,7 +112,8 @@ def create_app(web: Web) -> FastAPI:
 
     @app.get("/api/config", summary="what the page needs to draw its controls")
     def config() -> dict:
-        return {"jog": web.motion.settings.as_json(), "base": api_base.config()}
+        return {"jog": web.motion.settings.as_json(), "base": api_base.config(),
+                "pointer": web.motion.pointer.settings.page()}
 
     @app.websocket("/ws")
     async def feed(socket: WebSocket) -> None:
@@ -170,8 +171,16 @@ def _on_page_sound(web: Web, page, data: bytes) -> None:
         page.offer(json.dumps({"type": "mic-stopped", "text": str(exc)}))
 
 
+def _tool_pitch(web: Web, robot: str) -> float | None:
+    """The tool's rot(y') now, deg (a gamepad's stick leads it), or None before a Cartesian state."""
+    point = web.fleet.point(robot)
+    return None if point is None or len(point) < 4 else point[3]
+
+
 async def _on_page_message(web: Web, page, text: str) -> None:
-    """Hold-to-move over the socket: `hold` beats while a button is held, `release` on let go."""
+    """Streams over the socket: `hold` beats while a jog button is held and `point` reports of a
+    handheld pointer (asibot.web.pointer), `release` when either ends; `mic` starts or stops
+    the page's microphone."""
     try:
         msg = json.loads(text)
         kind = msg["type"]
@@ -186,14 +195,17 @@ async def _on_page_message(web: Web, page, text: str) -> None:
                 page.mic_rate = msg["rate"]
             except MicError as exc:
                 page.offer(json.dumps({"type": "refused", "text": str(exc)}))
-    elif kind == "hold":
+    elif kind in ("hold", "point"):
         robot = msg.get("robot")
         try:
             if robot not in web.fleet.ids():
                 raise RpcError("unavailable", f"Robot {robot!r} is not connected.")
             page.holding = robot
-            await asyncio.to_thread(web.motion.hold, robot, msg.get("space"), msg.get("axis"),
-                                    msg.get("direction"), msg.get("level"))
+            if kind == "hold":
+                await asyncio.to_thread(web.motion.hold, robot, msg.get("space"), msg.get("axis"),
+                                        msg.get("direction"), msg.get("level"))
+            else:
+                await asyncio.to_thread(web.motion.point, robot, msg, _tool_pitch(web, robot))
         except RpcError as exc:
             page.offer(json.dumps({"type": "refused", "code": exc.code, "text": exc.message}))
     elif kind == "release":

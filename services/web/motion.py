@@ -18,6 +18,7 @@ from asibot.bus import Bus
 from asibot.errors import RpcError
 from asibot.messages import EStop
 from asibot.poses import POINT_AXES
+from asibot.web.pointer import DeviceReading, PointerMapping
 
 #: The five speed levels of the jog buttons, as fractions of the jog speeds below.
 SPEED_LEVELS = (0.1, 0.25, 0.5, 0.75, 1.0)
@@ -64,9 +65,11 @@ def _direction(direction: int) -> int:
 class Motion:
     """The robot actions of the web page, each one bus call (or two) to the kinematics service."""
 
-    def __init__(self, bus: Bus, settings: JogSettings = JogSettings(), who: str = "web page") -> None:
+    def __init__(self, bus: Bus, settings: JogSettings = JogSettings(), who: str = "web page",
+                 pointer: PointerMapping | None = None) -> None:
         self.bus = bus
         self.settings = settings
+        self.pointer = pointer or PointerMapping()
         self.who = who
         self._lock = threading.Lock()
         self._steps: dict[str, tuple[str, list[float]]] = {}   # robot -> the last step's target
@@ -147,6 +150,14 @@ class Motion:
         if space == "joint":
             return self._call(robot, "movjv", velocity=v)
         return self._call(robot, "movv", velocity=v)
+
+    def point(self, robot: str, message: dict[str, Any], tool_pitch: float | None) -> dict:
+        """One report of a handheld pointer (asibot.web.pointer): the arm follows it while the
+        dead-man and a direction are on, and holds still (a `pointer` with the dead-man off, which
+        ends the stream at once) otherwise. A bad report raises bad_request and moves nothing."""
+        self._joints(robot)
+        request = self.pointer.request(DeviceReading.from_message(message), tool_pitch)
+        return self._call(robot, "pointer", **(request or {"deadman": False}))
 
     # --- moves ----------------------------------------------------------------------------
     def move(self, robot: str, kind: str, values: Sequence[float], *, relative: bool = False,

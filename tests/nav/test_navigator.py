@@ -13,7 +13,7 @@ from asibot.nav.errors import NavError, Unreachable
 from asibot.nav.geometry import Pose
 from asibot.nav.local import LocalController
 from asibot.nav.navigator import ABORTED, ACTIVE, CANCELED, IDLE, PREEMPTED, SUCCEEDED, Navigator
-from asibot.nav.planner import GlobalPlanner
+from asibot.nav.planner import GlobalPlanner, Path
 
 from .tinysim import Harness, TinySim
 
@@ -157,3 +157,63 @@ def test_local_controller_limits_and_blocking(apartment):
     cm.mark_points(np.full(21, 1.45), np.linspace(0.5, 1.5, 21), now=0.0)
     c = ctl.compute(start, (0.2, 0.0), cm)
     assert c.status == "blocked" and "obstacle" in c.text and (c.vx, c.wz) == (0.0, 0.0)
+
+
+def test_at_rest_on_the_edge_of_the_inflation_it_moves_on(apartment):
+    """Seen in the sim apartment: the robot stopped for 20 s where its path entered the
+    inflation beside the kitchen's east wall, since from rest the window reaches a few cm and
+    the first cm into the inflation cost more than they gained. Standing still is no way on."""
+    cm = Costmap(apartment.grid)
+    start = Pose(9.08, 2.86, math.radians(81))
+    # what the scans had marked there: the chair's corner and the wall, a cell off the map's
+    cm.mark_points(np.r_[np.full(5, 8.12), 8.18, 8.43], np.r_[np.linspace(2.88, 3.12, 5), 3.28, 3.18], now=0.0)
+    cm.mark_points(np.full(13, 10.02), np.linspace(2.43, 3.03, 13), now=0.0)
+    ctl = LocalController()
+    ctl.set_path(GlobalPlanner().plan(cm, start, Pose(0.75, 1.5, math.pi)))
+    pose, v = start, (0.0, 0.0)
+    for _ in range(30):       # 3 s at 10 Hz on ideal wheels
+        c = ctl.compute(pose, v, cm)
+        assert c.status == "moving", c.text
+        v = (c.vx, c.wz)
+        th = pose.theta + c.wz * 0.1
+        pose = Pose(pose.x + c.vx * 0.1 * math.cos(th), pose.y + c.vx * 0.1 * math.sin(th), th)
+    assert pose.distance(start) > 0.5
+
+
+def test_a_periodic_replan_keeps_the_way_being_followed_unless_the_new_one_is_no_longer(apartment):
+    """Chairs seen beside one way round the kitchen table made it a little dearer than the other
+    for a moment, and the robot turned back and forth between them. A way that is still free is
+    kept unless the new one is no longer; a blocked one is replaced at once."""
+    start, goal = Pose(9.0, 2.2, math.pi / 2), Pose(0.75, 1.5, math.pi)
+    real = GlobalPlanner()
+
+    class Planner:
+        """The real planner's first way, then whatever the test says the next plan is."""
+        def __init__(self) -> None:
+            self.next = None
+
+        def plan(self, costmap, a, b, label=""):
+            return self.next or real.plan(costmap, a, b, label)
+
+    cm, planner = Costmap(apartment.grid), Planner()
+    nav = Navigator(cm, planner=planner)
+    nav.goto(0.0, goal, "charging station", start)
+    first = nav.status.path
+    odom = type("Odom", (), {"vx": 0.0, "wz": 0.0})()
+    longer = Path.from_points(np.vstack([first.points[:1], [[9.5, 0.5], [6.0, 0.3], [4.5, 3.6], [2.0, 0.5]], first.points[-1:]]), goal)
+    assert longer.length > first.length + 1.5
+    planner.next = longer
+    t = nav.params.replan_period + 0.1
+    nav.step(t, start, None, odom)
+    assert nav.status.path is first                    # still free, and the other way is longer
+    shorter = Path.from_points(first.points[::2], goal)
+    planner.next = shorter
+    t += nav.params.replan_period + 0.1
+    nav.step(t, start, None, odom)
+    assert nav.status.path is shorter
+    # blocked right ahead: the new way is taken at once, however long
+    planner.next = longer
+    near = shorter.points[np.argmin(np.abs(np.hypot(shorter.points[:, 0] - start.x, shorter.points[:, 1] - start.y) - 1.0))]
+    cm.mark_points(np.full(5, near[0]) + np.linspace(-0.1, 0.1, 5), np.full(5, near[1]), now=0.0)
+    nav.step(t + 0.1, start, None, odom)
+    assert nav.status.path is longer

@@ -3,17 +3,29 @@ chromium driven by Playwright (never a downloaded browser)."""
 
 from __future__ import annotations
 
+import argparse
+import time
 from pathlib import Path
 
+import numpy as np
 import pytest
+from fastapi.testclient import TestClient
 
-from asibot.testing import Stack, wait_until
+from asibot import robots
+from asibot.bus import Bus
+from asibot.kinematics.model import solver_for
+from asibot.kinematics.server import KinematicsServer
+from asibot.web import service
+from asibot.testing import IdealDriver, Stack, memory_bus, wait_until
 
 ROOT = Path(__file__).resolve().parents[2]
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
 SHOTS = ROOT / "tests" / "web" / "screenshots"
+#: The `web` fixture's robot and where its ideal driver starts (rad).
+API_ROBOT = "asibot-sim"
+API_START = np.radians([0.0, 20.0, 40.0, 30.0, 0.0])
 
 
 def _stack(folder: Path, services: list[str], alive: list[str]):
@@ -83,3 +95,41 @@ def screenshot(page, name: str) -> Path:
     path = SHOTS / f"{name}.png"
     page.screenshot(path=str(path), full_page=True)
     return path
+
+
+@pytest.fixture(scope="module")
+def web(tmp_path_factory):
+    """The web service on the in-memory bus with an ideal ASIBOT driver (at START) and the real
+    kinematics server: (TestClient, the service, the driver, the kinematics server)."""
+    with memory_bus("web-api"):
+        spec = robots.get(API_ROBOT)
+        driver = IdealDriver(API_ROBOT, spec)
+        driver.set_joints(API_START)
+        kin_bus = Bus("kinematics")
+        server = KinematicsServer(kin_bus, API_ROBOT, solver_for(spec), spec)
+        web_bus = Bus("web")
+        svc = service.build(web_bus, argparse.Namespace(host="127.0.0.1", port=8080, lan=False, new_token=False,
+                                                         data=tmp_path_factory.mktemp("data")))
+        client = TestClient(svc.app)
+        wait_until(lambda: API_ROBOT in svc.fleet.ids() and svc.fleet.point(API_ROBOT) is not None, timeout=10)
+        yield client, svc, driver, server
+        svc.close()
+        server.close()
+        driver.close()
+        for bus in (web_bus, kin_bus):
+            bus.close()
+
+
+def settle(web) -> None:
+    """The `web` fixture's arm at rest, its controller idle and no command still on its way."""
+    client, svc, driver, server = web
+    server.ctl.stop()
+    wait_until(lambda: server.ctl.state == "not_controlling", timeout=2)
+    # The hold that a stop sends may still be on its way: wait until the driver hears nothing new.
+    seen = [len(driver.commands), time.monotonic()]
+
+    def quiet() -> bool:
+        if len(driver.commands) != seen[0]:
+            seen[:] = [len(driver.commands), time.monotonic()]
+        return time.monotonic() - seen[1] > 0.3
+    wait_until(quiet, timeout=5)

@@ -1,4 +1,5 @@
-"""Access in a real browser: switch scanning (one switch, Space alone) and WCAG 2.2 AA.
+"""Access in a real browser: switch scanning (one switch, Space alone), WCAG 2.2 AA and the handheld
+pointer (a simulated phone's tilt, a scripted gamepad).
 
 Against the kitchen simulation (and the apartment for the Pioneer page), with Debian's chromium:
 axe-core on every view, a task launched from the Launcher by step and by automatic scanning, the
@@ -16,6 +17,7 @@ import urllib.request
 
 import pytest
 
+from asibot import keys
 from asibot.testing import wait_until
 
 from .conftest import ROOT, screenshot
@@ -35,9 +37,9 @@ READY = {
     "home": "text=Teach the robot a task", "joint": ".jog-grid button", "cartesian": ".jog-grid button",
     "program": ".cm-content", "speech": ".points li", "assigner": ".icons button", "launcher": ".task-button",
     "video": ".video img, .video p", "access": "#access-intervalMs", "pioneer": ".jog-grid button",
-    "base": ".points li[data-place=fridge]",
+    "base": ".points li[data-place=fridge]", "pointer": "text=Motion control",
 }
-APARTMENT_VIEWS = ("pioneer", "base")
+APARTMENT_VIEWS = ("pioneer", "base")   # their axe test is in test_pioneer_page.py
 KITCHEN_VIEWS = [v for v in READY if v not in APARTMENT_VIEWS]
 
 
@@ -559,17 +561,145 @@ def test_a_confirm_button_waits_as_long_as_it_takes(page):
     page.get_by_text("keep-me deleted.").wait_for()
 
 
-# Last: the apartment (a second simulation) starts only for these tests, after all of the kitchen's.
-@pytest.mark.parametrize("view", APARTMENT_VIEWS)
-def test_axe_on_the_apartment_pages(browser, apartment, view):
+# --- the handheld pointer: a simulated phone and a scripted gamepad, no mouse -------------------
+
+# A phone that reports its tilt every 50 ms while window.__tilt is set (as a real one does while
+# held), and a gamepad whose state the test sets in window.__pad.
+DEVICES = """
+window.__tilt = null;
+setInterval(() => {
+  if (window.__tilt) window.dispatchEvent(new DeviceOrientationEvent('deviceorientation', { alpha: 0, ...window.__tilt }));
+}, 50);
+window.__pad = null;
+navigator.getGamepads = () => {
+  const p = window.__pad;
+  if (!p) return [null, null, null, null];
+  return [{ id: 'Scripted pad', index: 0, connected: true, mapping: 'standard', timestamp: performance.now(),
+            axes: p.axes, buttons: Array.from({ length: 17 }, (_, i) => ({ pressed: p.pressed.includes(i), touched: false, value: p.pressed.includes(i) ? 1 : 0 })) }, null, null, null];
+};
+"""
+
+
+#: Where the pointer tests start the arm, deg: the tool ahead and a little down, the tip in reach.
+POINTER_START = [0.0, 30.0, 60.0, 30.0, 0.0]
+
+
+def stat(stack) -> dict:
+    return stack.bus.call(keys.cart_rpc(ROBOT, "stat"), timeout=5)
+
+
+def reach(point) -> float:
+    return math.hypot(point[0], point[1])
+
+
+def azimuth(point) -> float:
+    return math.atan2(point[1], point[0])
+
+
+@pytest.fixture
+def pointer(browser, kitchen):
     context = browser.new_context(viewport={"width": 1366, "height": 900})
+    context.add_init_script(DEVICES)
     page = context.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(kitchen.web_url + "#pointer")
+    page.wait_for_selector("body[data-ready=true]", timeout=15000)
+    page.wait_for_selector(".robot-card[data-robot=asibot-sim]", timeout=15000)
+    page.wait_for_selector("text=Motion control")
+    # out of the stretched-up home pose (a singularity, where the tip cannot go further out)
+    kitchen.bus.call(keys.cart_rpc(ROBOT, "movj"), {"joints": POINTER_START, "speed": 1.0}, timeout=5)
+    wait_until(lambda: stat(kitchen)["state"] == "not_controlling", timeout=20, interval=0.1)
     try:
-        page.goto(apartment.web_url + f"#{view}")
-        page.wait_for_selector("body[data-ready=true]")
-        page.wait_for_selector(READY[view], timeout=20000)
-        if view == "pioneer":
-            page.wait_for_function("document.querySelectorAll('.jog-grid').length === 2", timeout=15000)
-        assert axe(page) == []
+        yield page
     finally:
+        kitchen.bus.call(keys.cart_rpc(ROBOT, "stop"), timeout=5)
         context.close()
+    assert not errors, f"the page raised: {errors}"
+
+
+def press_button(page, name: str, key: str = "Space") -> None:
+    """Focus a button by its name and press a key on it (no mouse)."""
+    page.get_by_role("button", name=name, exact=True).focus()
+    page.keyboard.press(key)
+
+
+def phone_with_deadman_on(page, beta: float, gamma: float) -> None:
+    """Phone tilt chosen, the dead-man set to toggle and switched on, the phone held at (beta,
+    gamma) deg and reporting, all by keyboard."""
+    press_button(page, "Phone tilt")
+    press_button(page, "Tap the dead-man on and off")
+    page.evaluate(f"window.__tilt = {{ beta: {beta}, gamma: {gamma} }}")
+    page.wait_for_selector(f"text=Phone: pitch {beta:g}°, roll {gamma:g}°")
+    press_button(page, "Dead-man: off")
+    page.wait_for_selector("text=Dead-man on: press Forward or Back to move.")
+
+
+def test_motion_control_is_off_until_chosen_and_tilting_then_moves_nothing(pointer, kitchen):
+    page = pointer
+    assert page.get_by_role("button", name="Off", exact=True).get_attribute("aria-pressed") == "true"
+    assert page.locator(".deadman").is_disabled()
+    page.evaluate("window.__tilt = { beta: 30, gamma: -40 }")
+    before = stat(kitchen)["point"]
+    for _ in range(10):                      # half a second of tilting: the controller stays idle
+        page.wait_for_timeout(50)
+        assert stat(kitchen)["state"] == "not_controlling"
+    after = stat(kitchen)["point"]
+    assert math.dist(after[:3], before[:3]) < 0.005          # the arm settling after its movj, no more
+    screenshot(page, "pointer-off")
+
+
+def test_a_tilted_phone_with_the_toggled_deadman_drives_the_tip_and_stops_when_let_go(pointer, kitchen):
+    page = pointer
+    phone_with_deadman_on(page, 0, -30)      # flat, tipped left
+    start = stat(kitchen)["point"]
+    page.get_by_role("button", name="Forward", exact=True).focus()
+    page.keyboard.down("Space")
+    try:
+        wait_until(lambda: reach(stat(kitchen)["point"]) > reach(start) + 0.01, timeout=10, interval=0.1,
+                   message="Forward with a level phone did not move the tip out")
+        wait_until(lambda: azimuth(stat(kitchen)["point"]) > azimuth(start) + math.radians(2), timeout=10, interval=0.1,
+                   message="tipping the phone left did not turn the arm counter-clockwise")
+        screenshot(page, "pointer-phone-moving")
+    finally:
+        page.keyboard.up("Space")
+    wait_until(lambda: stat(kitchen)["state"] == "not_controlling", timeout=2, interval=0.05,
+               message="letting go of Forward did not stop the arm")
+
+
+@pytest.mark.parametrize("cut, sentence", [
+    ("window.__tilt = null", "The phone stopped reporting its tilt: the arm stopped."),        # the phone goes quiet
+    ("window.dispatchEvent(new Event('blur'))", "The page lost focus: the arm stopped and the dead-man is off."),
+])
+def test_a_quiet_phone_or_a_lost_focus_stops_the_arm_and_turns_the_deadman_off(pointer, kitchen, cut, sentence):
+    page = pointer
+    phone_with_deadman_on(page, 10, 0)
+    page.get_by_role("button", name="Forward", exact=True).focus()
+    page.keyboard.down("Space")
+    try:
+        wait_until(lambda: stat(kitchen)["state"] == "pointer", timeout=5, interval=0.05)
+        page.evaluate(cut)
+        wait_until(lambda: stat(kitchen)["state"] == "not_controlling", timeout=3, interval=0.05,
+                   message=f"the arm did not stop: {sentence}")
+        page.wait_for_selector(f"text={sentence}")
+        assert page.get_by_role("button", name="Dead-man: off", exact=True).is_visible()
+    finally:
+        page.keyboard.up("Space")
+
+
+def test_a_gamepad_moves_the_tip_while_its_deadman_is_held(pointer, kitchen):
+    page = pointer
+    press_button(page, "Gamepad")
+    press_button(page, "Hold the dead-man")
+    page.evaluate("window.__pad = { axes: [0, 0, 0, 0], pressed: [] }")
+    page.wait_for_selector("text=Gamepad stick: up 0.00, right 0.00")
+    start = stat(kitchen)["point"]
+    page.evaluate("window.__pad = { axes: [0, 0, 0, 0], pressed: [7] }")     # forward, no dead-man
+    page.wait_for_timeout(400)
+    assert stat(kitchen)["state"] == "not_controlling"
+    page.evaluate("window.__pad = { axes: [0, 0, 0, 0], pressed: [0, 7] }")  # dead-man A and forward
+    wait_until(lambda: reach(stat(kitchen)["point"]) > reach(start) + 0.01, timeout=10, interval=0.1,
+               message="the gamepad did not move the tip forward")
+    page.evaluate("window.__pad = { axes: [0, 0, 0, 0], pressed: [7] }")     # let go of the dead-man
+    wait_until(lambda: stat(kitchen)["state"] == "not_controlling", timeout=2, interval=0.05,
+               message="releasing the gamepad's dead-man did not stop the arm")

@@ -6,61 +6,23 @@ What a page (or anything else) can send: every action answers JSON; every bad in
 
 from __future__ import annotations
 
-import argparse
 import math
-import time
 
 import numpy as np
 import pytest
-from fastapi.testclient import TestClient
 
-from asibot import keys, robots
+from asibot import keys
 from asibot.bus import Bus
-from asibot.kinematics.model import solver_for
-from asibot.kinematics.server import KinematicsServer
 from asibot.messages import EStop
-from asibot.testing import IdealDriver, memory_bus, wait_until
-from asibot.web import service
+from asibot.testing import wait_until
 
-ROBOT = "asibot-sim"
-START = np.radians([0.0, 20.0, 40.0, 30.0, 0.0])
-
-
-@pytest.fixture(scope="module")
-def web(tmp_path_factory):
-    with memory_bus("web-api"):
-        spec = robots.get(ROBOT)
-        driver = IdealDriver(ROBOT, spec)
-        driver.set_joints(START)
-        kin_bus = Bus("kinematics")
-        server = KinematicsServer(kin_bus, ROBOT, solver_for(spec), spec)
-        web_bus = Bus("web")
-        svc = service.build(web_bus, argparse.Namespace(host="127.0.0.1", port=8080, lan=False, new_token=False,
-                                                         data=tmp_path_factory.mktemp("data")))
-        client = TestClient(svc.app)
-        wait_until(lambda: ROBOT in svc.fleet.ids() and svc.fleet.point(ROBOT) is not None, timeout=10)
-        yield client, svc, driver, server
-        svc.close()
-        server.close()
-        driver.close()
-        for bus in (web_bus, kin_bus):
-            bus.close()
+from .conftest import API_ROBOT as ROBOT, API_START as START, settle
 
 
 @pytest.fixture
 def api(web):
-    client, svc, driver, server = web
-    server.ctl.stop()
-    wait_until(lambda: server.ctl.state == "not_controlling", timeout=2)
-    # The hold that a stop sends may still be on its way: wait until the driver hears nothing new.
-    seen = [len(driver.commands), time.monotonic()]
-
-    def quiet() -> bool:
-        if len(driver.commands) != seen[0]:
-            seen[:] = [len(driver.commands), time.monotonic()]
-        return time.monotonic() - seen[1] > 0.3
-    wait_until(quiet, timeout=5)
-    return client
+    settle(web)
+    return web[0]
 
 
 def refused(reply, status: int, *words: str) -> str:

@@ -11,6 +11,7 @@ from asibot.messages import ArmState, Pose2D
 from asibot.testing import Inbox, wait_until
 
 from .conftest import screenshot
+from .test_access import APARTMENT_VIEWS, READY, axe
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
 
@@ -153,3 +154,19 @@ def test_bad_base_requests_get_a_sentence_and_nothing_moves(apartment, path, bod
     n = len(truth)
     wait_until(lambda: len(truth) >= n + 10, timeout=5)     # half a second of truth after the refusal
     assert all(math.hypot(p.x - before.x, p.y - before.y) < 0.01 for p in truth.all()[n:])
+
+
+# axe on the apartment's pages, here where the apartment runs anyway (test_access has the kitchen's).
+@pytest.mark.parametrize("view", APARTMENT_VIEWS)
+def test_axe_on_the_apartment_pages(browser, apartment, view):
+    context = browser.new_context(viewport={"width": 1366, "height": 900})
+    page = context.new_page()
+    try:
+        page.goto(apartment.web_url + f"#{view}")
+        page.wait_for_selector("body[data-ready=true]")
+        page.wait_for_selector(READY[view], timeout=20000)
+        if view == "pioneer":
+            page.wait_for_function("document.querySelectorAll('.jog-grid').length === 2", timeout=15000)
+        assert axe(page) == []
+    finally:
+        context.close()

@@ -1,6 +1,6 @@
 // The page: tabs as client-side views (a tab change loads no page), the Connection Manager, the
 // emergency stop (button and Esc key), and the live feed that keeps every view current.
-import { api, chosenRobot, connectFeed, onChange, state } from './api.js';
+import { api, chosenRobot, connectFeed, onChange, onMessage, state } from './api.js';
 import { mountConnection } from './connection.js';
 import { startScanning } from './scanning.js';
 import { attempt, el, notify } from './ui.js';
@@ -9,6 +9,7 @@ import { render as renderWizard } from './wizard.js';
 import home from './views/home.js';
 import joint from './views/joint.js';
 import cartesian from './views/cartesian.js';
+import pointer from './views/pointer.js';
 import program from './views/program.js';
 import speech from './views/speech.js';
 import assigner from './views/assigner.js';
@@ -18,7 +19,7 @@ import pioneer from './views/pioneer.js';
 import base from './views/base.js';
 import access from './views/access.js';
 
-const VIEWS = [home, joint, cartesian, program, speech, assigner, launcher, video, pioneer, base, access];
+const VIEWS = [home, joint, cartesian, pointer, program, speech, assigner, launcher, video, pioneer, base, access];
 let active = null;   // { view, handle }
 
 function emergencyStop() {
@@ -80,6 +81,8 @@ async function start() {
     if (robot && robot.joints) viewer().setJoints(robot.joints.names, robot.joints.deg);
     if (active && active.handle.update) active.handle.update(robot);
   });
+  // A streamed motion (a held jog button, the pointer) that the server refused: say why.
+  onMessage((msg) => { if (msg.type === 'refused') notify(msg.text); });
   connectFeed();
   show(location.hash.slice(1) || 'home');
   document.body.dataset.ready = 'true';
