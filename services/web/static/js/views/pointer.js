@@ -94,13 +94,14 @@ export default {
     // --- the buttons ----------------------------------------------------------------------
     const deadman = el('button', { type: 'button', class: 'deadman', 'aria-pressed': 'false' }, 'Dead-man');
     const hold = (button, name) => {
-      const on = () => { input[name] = true; sync(); };
-      const off = () => { input[name] = false; sync(); };
+      // A press acts at once (the next beat may be 60 ms away); a let-go stops at once.
+      const on = () => { input[name] = true; sync(); beat(); };
+      const off = () => { input[name] = false; sync(); beat(); };
       button.addEventListener('pointerdown', (e) => {
         if (e.button !== 0) return;
         e.preventDefault();
         button.setPointerCapture(e.pointerId);
-        if (name === 'deadman' && prefs.deadman === 'toggle') { input.deadman = !input.deadman; sync(); return; }
+        if (name === 'deadman' && prefs.deadman === 'toggle') { input.deadman = !input.deadman; sync(); beat(); return; }
         on();
       });
       for (const ev of ['pointerup', 'pointercancel', 'lostpointercapture']) {
@@ -109,7 +110,7 @@ export default {
       button.addEventListener('keydown', (e) => {
         if ((e.key !== ' ' && e.key !== 'Enter') || e.repeat) return;
         e.preventDefault();
-        if (name === 'deadman' && prefs.deadman === 'toggle') { input.deadman = !input.deadman; sync(); return; }
+        if (name === 'deadman' && prefs.deadman === 'toggle') { input.deadman = !input.deadman; sync(); beat(); return; }
         on();
       });
       button.addEventListener('keyup', (e) => {
