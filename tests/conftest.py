@@ -27,6 +27,20 @@ def router():
         yield endpoint
 
 
+@pytest.fixture(scope="session", autouse=True)
+def user_data(tmp_path_factory):
+    """The user's data folder is a temporary one for the whole session: no test reads or writes
+    the real ~/.local/share/asibot (a developer's own settings there must not change a test)."""
+    folder = tmp_path_factory.mktemp("user-data")
+    old = os.environ.get("ASIBOT_DATA")
+    os.environ["ASIBOT_DATA"] = str(folder)
+    yield folder
+    if old is None:
+        os.environ.pop("ASIBOT_DATA", None)
+    else:
+        os.environ["ASIBOT_DATA"] = old
+
+
 def pytest_addoption(parser):
     parser.addoption("--cpu-burners", type=int, default=int(os.environ.get("ASIBOT_CPU_BURNERS", "0")),
                      help="keep N busy processes running during the tests (stress: a loaded machine)")

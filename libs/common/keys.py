@@ -21,7 +21,7 @@ RPC_VERBS_NAV = ("goto", "cancel", "result", "status", "places", "save_place", "
                  "localize", "save_map", "map_start", "map_stop", "map_save")
 RPC_VERBS_PERCEPTION = ("find",)
 RPC_VERBS_TASKS = ("list", "launch", "stop", "status")
-RPC_VERBS_VOICE = ("status",)
+RPC_VERBS_VOICE = ("status", "settings")
 
 
 def _chunk(value: str, what: str) -> str:

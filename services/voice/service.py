@@ -18,13 +18,16 @@ the worker, so it never waits behind a slow launch. docs/voice.md, "The service"
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import os
 import queue
 import threading
 import time
+from pathlib import Path
 
 from asibot import keys, messages, runtime
+from asibot.files import data_dir, write_atomic
 from asibot.bus import Bus
 from asibot.errors import RpcError, Unavailable, arguments
 from asibot.estop import who
@@ -97,12 +100,14 @@ class BusRobots:
 class VoiceService(runtime.Service):
     def __init__(self, bus: Bus, robot: str, speaker: object, *, confirm: bool = False, answer_seconds: float = 8.0,
                  refresh: float = 2.0, source_timeout: float = FORGET_AFTER,
-                 recognizer: Recognizer | None = None) -> None:
+                 recognizer: Recognizer | None = None, settings_file: Path | None = None) -> None:
         self.bus, self.robot, self.speaker, self.refresh_period = bus, robot, speaker, refresh
         self.recognizer = recognizer or Recognizer()
         self.grammar = self.recognizer.grammar
         self.tasks_problem = "The Task Creator was not asked yet."
         self.robots = BusRobots(bus, robot)
+        self.settings_file = settings_file or data_dir() / "voice" / "settings.json"
+        confirm = _saved_confirm(self.settings_file, default=confirm)
         self.commands = Commands(self.robots, speaker, confirm=confirm, answer_seconds=answer_seconds)
         self.mic = None
         self._asked_by = ""
@@ -113,6 +118,7 @@ class VoiceService(runtime.Service):
         bus.subscribe(keys.ALL_VOICE_AUDIO, AudioChunk, self._on_chunk, with_key=True, on_reject=self._on_bad_chunk)
         bus.subscribe(keys.events(robot), Event, self.commands.on_event)
         bus.serve(keys.voice_rpc("status"), self._status)
+        bus.serve(keys.voice_rpc("settings"), self._settings)
         self._threads = [threading.Thread(target=fn, name=name, daemon=True)
                          for fn, name in ((self._act, "voice-commands"), (self._housekeeping, "voice-tasks"))]
         for t in self._threads:
@@ -207,6 +213,19 @@ class VoiceService(runtime.Service):
                 "sources": self.streams.sources(), "confirm": self.commands.confirm, "pending": self.commands.pending,
                 "live_robots": self.robots.live()}
 
+    def _settings(self, req: dict) -> dict:
+        """{"confirm": true|false}: ask "Shall I start ...? Say yes or no." before a task heard
+        starts (the page's setting, kept in the user's data folder); no field: just read it."""
+        arguments(req, "settings", "confirm")
+        confirm = req.get("confirm")
+        if confirm is not None:
+            if not isinstance(confirm, bool):
+                raise RpcError("bad_request", f"confirm must be true or false; got {str(confirm)[:40]!r}. Nothing was changed.")
+            self.settings_file.parent.mkdir(parents=True, exist_ok=True)
+            write_atomic(self.settings_file, json.dumps({"confirm": confirm}).encode())
+            self.commands.confirm = confirm
+        return {"confirm": self.commands.confirm}
+
     def health(self) -> dict:
         return {"robot": self.robot, "words": len(self.words()), "refused": len(self.grammar.refused),
                 "tasks": self.tasks_problem or "ok", "sources": len(self.streams.sources()),
@@ -223,9 +242,23 @@ class VoiceService(runtime.Service):
             t.join(1.0)
 
 
+def _saved_confirm(path: Path, default: bool) -> bool:
+    """The page's "ask yes first" setting if one was saved, else `default` (--confirm). A file
+    that cannot be read is left alone, with a warning: the setting is the default until saved."""
+    try:
+        value = json.loads(path.read_text()).get("confirm")
+    except FileNotFoundError:
+        return default
+    except (OSError, ValueError, AttributeError) as exc:
+        log.warning("voice: %s is not a settings file (%s); asking yes first: %s", path, exc, default)
+        return default
+    return value if isinstance(value, bool) else default
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--confirm", action="store_true",
-                   help="ask 'Shall I start <task>? Say yes or no.' before launching a task heard")
+                   help="ask 'Shall I start <task>? Say yes or no.' before launching a task heard (unless "
+                        "the page's setting, kept in <data>/voice/settings.json, says otherwise)")
     p.add_argument("--answer-seconds", type=float, default=8.0, help="s to wait for yes or no (default 8)")
     p.add_argument("--refresh", type=float, default=2.0, help="s between two looks at the tasks' words (default 2)")
     p.add_argument("--source-timeout", type=float, default=FORGET_AFTER,

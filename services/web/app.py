@@ -12,16 +12,17 @@ import asyncio
 import contextlib
 import json
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from fastapi import FastAPI, WebSocket, WebSocketDisconnect
-from fastapi.responses import FileResponse, JSONResponse
+from fastapi.responses import FileResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
+from pydantic import BaseModel, ConfigDict, StrictBool
 
 from asibot.errors import RpcError
-from asibot.web import errors
+from asibot.web import errors, lan
 from asibot.web.api_files import ICON_LIMIT, IMPORT_LIMIT
 from asibot.web.api_files import router as files_router
 from asibot.web import api_base
@@ -55,6 +56,7 @@ class Web:
     cameras: Cameras
     tasks: TaskDesk
     voice: VoiceRelay
+    phones: lan.PhoneAccess = field(default_factory=lan.PhoneAccess)
 
 
 class BodyLimit:
@@ -90,6 +92,12 @@ class BodyLimit:
             await too_big(scope, receive, send)
 
 
+class VoiceSettings(BaseModel):
+    """Ask "Shall I start <task>? Say yes or no." before a task heard by voice starts."""
+    model_config = ConfigDict(extra="forbid")
+    confirm: StrictBool
+
+
 class _TooBig(Exception):
     pass
 
@@ -109,6 +117,27 @@ def create_app(web: Web) -> FastAPI:
     app.include_router(robots_router)
     app.include_router(files_router)
     app.include_router(api_base.router)
+
+    @app.get("/api/voice", summary="the voice service's settings (ask yes first before a task heard starts)")
+    async def voice_settings() -> dict:
+        return await asyncio.to_thread(web.voice.settings)
+
+    @app.put("/api/voice", summary="change the voice service's settings")
+    async def change_voice_settings(change: VoiceSettings) -> dict:
+        return await asyncio.to_thread(web.voice.settings, change.confirm)
+
+    @app.get("/api/phone", summary="how a phone or tablet reaches this page (LAN mode: its address and token)")
+    def phone() -> dict:
+        return web.phones.json()
+
+    @app.get("/api/phone/qr.png", summary="the QR code of the first LAN address, for a phone's camera",
+             response_class=Response)
+    def phone_qr() -> Response:
+        urls = web.phones.urls
+        if not urls:
+            raise RpcError("unavailable", "This page is served to this computer only: there is no LAN address "
+                                          "to show (start the web service with --lan).")
+        return Response(lan.qr_png(urls[0]), media_type="image/png", headers={"Cache-Control": "no-store"})
 
     @app.get("/api/config", summary="what the page needs to draw its controls")
     def config() -> dict:

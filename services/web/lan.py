@@ -123,3 +123,36 @@ class TokenGate:
         await send({"type": "http.response.start", "status": 401,
                     "headers": [(b"content-type", b"text/plain; charset=utf-8")]})
         await send({"type": "http.response.body", "body": body})
+
+
+def qr_png(text: str) -> bytes:
+    """A QR code of `text` as a PNG (black on white, a quiet zone of 4 modules, 8 px a module):
+    a phone's camera app opens it."""
+    import io
+
+    import segno
+    out = io.BytesIO()
+    segno.make(text, error="m").save(out, kind="png", scale=8, border=4)
+    return out.getvalue()
+
+
+class PhoneAccess:
+    """How a phone or tablet reaches this page, for the Home page: in LAN mode the address with
+    the token (as text and as a QR code; only a browser that already has the token sees it),
+    else a sentence that says how to serve the LAN."""
+
+    def __init__(self, urls: list[str] | None = None) -> None:
+        self.urls = urls or []
+
+    @classmethod
+    def lan(cls, addresses: list[str], port: int, token: str) -> "PhoneAccess":
+        return cls([f"https://{a}:{port}/?token={token}" for a in addresses])
+
+    def json(self) -> dict[str, Any]:
+        if not self.urls:
+            return {"lan": False, "urls": [], "text": "This page is served to this computer only. For a phone or a "
+                    "tablet on your network (the Pointer tab, the Launcher), start the web service with --lan "
+                    "(python -m asibot.web --lan): it serves HTTPS with an access token and shows its QR code here."}
+        return {"lan": True, "urls": self.urls, "text": "Point the phone's camera at the code, or type the address: "
+                "the phone keeps the access, so this is needed once. The browser warns about the self-signed "
+                "certificate the first time; accept it for this robot."}

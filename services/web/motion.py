@@ -154,9 +154,15 @@ class Motion:
     def point(self, robot: str, message: dict[str, Any], tool_pitch: float | None) -> dict:
         """One report of a handheld pointer (asibot.web.pointer): the arm follows it while the
         dead-man and a direction are on, and holds still (a `pointer` with the dead-man off, which
-        ends the stream at once) otherwise. A bad report raises bad_request and moves nothing."""
+        ends the stream at once) otherwise. A bad report stops the arm (a device that sends
+        NaN mid-stream must not leave it moving until the watchdog) and raises bad_request."""
         self._joints(robot)
-        request = self.pointer.request(DeviceReading.from_message(message), tool_pitch)
+        try:
+            reading = DeviceReading.from_message(message)
+        except RpcError:
+            self._call(robot, "pointer", deadman=False)
+            raise
+        request = self.pointer.request(reading, tool_pitch)
         return self._call(robot, "pointer", **(request or {"deadman": False}))
 
     # --- moves ----------------------------------------------------------------------------

@@ -73,6 +73,7 @@ class WebService(runtime.Service):
             self.app = lan_access.TokenGate(self.app, token)
             tls = {"ssl_certfile": str(cert), "ssl_keyfile": str(key)}
             where = lan_access.lan_addresses() or [socket.gethostname()]
+            self.web.phones = lan_access.PhoneAccess.lan(where, port, token)
             if made:
                 for address in where:
                     print(f"web: open https://{address}:{port}/?token={token} on a phone or tablet of this network "

@@ -14,6 +14,7 @@ from typing import Any, Callable
 
 from asibot import keys
 from asibot.bus import Bus
+from asibot.errors import RpcError
 from asibot.messages import AudioChunk, Event, VoiceHeard
 
 #: What the page may send: a browser's AudioContext runs at 8 to 48 kHz (usually 44.1 or 48);
@@ -59,6 +60,18 @@ class VoiceRelay:
             raise MicError(f"A microphone frame must be 1 to {int(rate * LONGEST_S)} float32 samples; "
                            f"this one had {len(data)} bytes.")
         pub.put(AudioChunk(data=bytes(data), rate=rate, sample="float32", channels=1))
+
+    def settings(self, confirm: bool | None = None) -> dict[str, Any]:
+        """The voice service's settings (`confirm`: ask yes first before a task heard starts),
+        changed first when `confirm` is given. RpcError unavailable when it does not run."""
+        request = {} if confirm is None else {"confirm": confirm}
+        try:
+            return {"confirm": self.bus.call(keys.voice_rpc("settings"), request, timeout=3.0)["confirm"]}
+        except RpcError as exc:
+            if exc.code in ("unavailable", "timeout"):
+                raise RpcError("unavailable", "The voice service is not running: `asibot up` starts it "
+                                              "(service voice), and then this setting can be changed.") from None
+            raise
 
     def _on_heard(self, heard: VoiceHeard) -> None:
         msg = {name: getattr(heard, name) for name in heard._fields if name != "stamp"}

@@ -5,6 +5,7 @@ that go silent, floods, the local microphone, the service's shape."""
 
 from __future__ import annotations
 
+import json
 import sys
 import threading
 import types
@@ -79,6 +80,7 @@ class Rig:
 
     def __init__(self, speech, *argv: str, tasks=TASKS, drivers=(ROBOT,)) -> None:
         self.speech = speech
+        self.closed = False
         self.web_bus, self.test_bus, self.voice_bus = Bus("web"), Bus("test"), Bus("voice")
         self.desk = TaskDesk(self.web_bus, tasks)
         for robot in drivers:
@@ -113,6 +115,9 @@ class Rig:
         return self.svc.speaker.said
 
     def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
         self.svc.close()
         for bus in (self.voice_bus, self.test_bus, self.web_bus):
             bus.close()
@@ -202,6 +207,23 @@ def test_confirm_yes_launches_no_and_silence_do_not(rig):
     h = r.next_heard(6)                                      # nobody answers within 1 s
     assert (h.source, h.action, h.task, h.reason) == (SOURCE, "cancel", "Drink water", "No answer within 1 s.")
     assert len(r.desk.verbs("launch")) == 1
+
+
+def test_the_pages_ask_yes_first_setting_is_kept_and_bad_values_change_nothing(rig, tmp_path, monkeypatch):
+    monkeypatch.setenv("ASIBOT_DATA", str(tmp_path))
+    r = rig()
+    call = lambda req: r.test_bus.call(keys.voice_rpc("settings"), req, timeout=5)["confirm"]   # noqa: E731
+    assert call({}) is False
+    with pytest.raises(RpcError) as exc:
+        call({"confirm": "yes"})
+    assert exc.value.code == "bad_request" and "true or false" in exc.value.message
+    assert call({"confirm": True}) is True
+    r.say("drink")
+    assert r.next_heard(1).action == "ask"
+    assert json.loads((tmp_path / "voice" / "settings.json").read_text()) == {"confirm": True}
+    r.close()
+    again = rig()                                             # a restart keeps the person's choice
+    assert again.test_bus.call(keys.voice_rpc("status"), timeout=5)["confirm"] is True
 
 
 def test_a_word_added_to_a_task_is_heard_after_the_refresh(rig):

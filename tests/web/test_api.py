@@ -232,3 +232,11 @@ def test_other_services_launch_a_task_on_the_bus_and_hear_how_it_ended(web, api)
         assert other.call(keys.tasks_rpc("status"), {}, timeout=5)["last"]["ok"] is True
     finally:
         other.close()
+
+
+def test_the_voice_setting_without_the_voice_service_says_how_to_start_it(api):
+    reply = api.get("/api/voice")
+    assert reply.status_code == 503 and "voice service is not running" in reply.json()["message"]
+    assert api.put("/api/voice", json={"confirm": True}).status_code == 503
+    assert api.put("/api/voice", json={"confirm": "yes"}).status_code == 422
+    assert api.put("/api/voice", json={"confirm": True, "shout": 1}).status_code == 422

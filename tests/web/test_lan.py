@@ -8,7 +8,9 @@ import ssl
 import stat
 import threading
 
+import cv2
 import httpx
+import numpy as np
 import pytest
 
 from asibot.bus import Bus
@@ -20,6 +22,10 @@ def args(tmp_path, **kw) -> argparse.Namespace:
     base = dict(host=None, port=free_port(), data=tmp_path, lan=False, new_token=False)
     base.update(kw)
     return argparse.Namespace(**base)
+
+
+def anonymous_refused(url: str, context) -> bool:
+    return httpx.get(url, verify=context, timeout=5).status_code == 401
 
 
 def test_serving_beyond_this_machine_needs_lan_mode(tmp_path, monkeypatch):
@@ -58,10 +64,18 @@ def test_lan_mode_serves_https_and_only_with_the_token(tmp_path, capsys):
                 assert refused.status_code == 401 and "token" in refused.text
                 assert anonymous.get(url + "/?token=wrong").status_code == 401
                 assert anonymous.post(url + "/api/estop").status_code == 401
+            assert anonymous_refused(url + "/api/phone", context)       # the address holds the token
             with httpx.Client(verify=context, timeout=5) as phone:
                 first = phone.get(url + f"/?token={token}", follow_redirects=False)
                 assert first.status_code == 303 and "HttpOnly" in first.headers["set-cookie"]
                 assert phone.get(url + "/api/robots").status_code == 200
+                # Home's QR code: a camera reads the address that lets the next phone in
+                how = phone.get(url + "/api/phone").json()
+                assert how["lan"] and all(u.endswith(f"?token={token}") and u.startswith("https://") for u in how["urls"])
+                png = phone.get(url + "/api/phone/qr.png")
+                assert png.headers["content-type"] == "image/png"
+                image = cv2.imdecode(np.frombuffer(png.content, np.uint8), cv2.IMREAD_GRAYSCALE)
+                assert cv2.QRCodeDetector().detectAndDecode(image)[0] == how["urls"][0]
             assert httpx.get(url + "/api/robots", headers={"Authorization": f"Bearer {token}"},
                              verify=context).status_code == 200
             with pytest.raises(httpx.HTTPError):
@@ -77,3 +91,17 @@ def test_lan_mode_serves_https_and_only_with_the_token(tmp_path, capsys):
         renewed = service.build(bus, args(tmp_path, host="127.0.0.1", lan=True, new_token=True))
         assert "?token=" in capsys.readouterr().out and (folder / "token").read_text() != token
         renewed.close()
+
+
+def test_on_this_machine_only_home_says_how_to_reach_a_phone(tmp_path):
+    from fastapi.testclient import TestClient
+    with memory_bus("lan-none") as ep, Bus("web", ep) as bus:
+        svc = service.build(bus, args(tmp_path, host="127.0.0.1"))
+        try:
+            client = TestClient(svc.app)
+            how = client.get("/api/phone").json()
+            assert how == {"lan": False, "urls": [], "text": how["text"]} and "--lan" in how["text"]
+            refused = client.get("/api/phone/qr.png")
+            assert refused.status_code == 503 and "--lan" in refused.json()["message"]
+        finally:
+            svc.close()

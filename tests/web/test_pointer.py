@@ -151,3 +151,12 @@ def test_a_pointer_for_a_robot_that_is_not_there_is_refused(socket):
     while reply["type"] != "refused":
         reply = ws.receive_json()
     assert "nobody" in reply["text"]
+
+
+def test_a_bad_reading_in_the_middle_of_a_stream_stops_the_arm_at_once(socket):
+    ws, svc, driver, server = socket
+    wait_until(lambda: (point(ws), server.ctl.state == "pointer")[1], timeout=5, interval=0.05,
+               message="the stream did not start")
+    point(ws, roll=float("inf"))
+    wait_until(lambda: server.ctl.state == "not_controlling", timeout=2, interval=0.01,
+               message="a bad reading mid-stream left the arm moving")

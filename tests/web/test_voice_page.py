@@ -115,3 +115,21 @@ def test_a_phrase_it_does_not_know_launches_nothing(kitchen_voice, tmp_path):
         assert all(h.action == "nothing" for h in heard.all()), [(h.action, h.text) for h in heard.all()]
         assert not any(e.code == "task_started" for e in events.all())
         page.locator(".events li", has_text="Something I do not know").first.wait_for(timeout=10000)
+
+
+def test_asking_yes_first_is_set_on_the_page_and_a_task_heard_then_waits_for_yes(kitchen_voice, tmp_path):
+    with listening(kitchen_voice, tmp_path, "give me the red can") as (page, heard, events):
+        ask = page.get_by_role("button", name='Ask me "yes" first')
+        ask.click()
+        page.get_by_text('A task heard now starts after you say "yes".').wait_for(timeout=10000)
+        assert ask.get_attribute("aria-pressed") == "true"
+        assert http(kitchen_voice, "GET", "/api/voice") == {"confirm": True}
+        start = len(heard.all())
+        wait_until(lambda: any(h.action == "ask" for h in heard.all()[start:]), 60, interval=0.2,
+                   message=f"heard: {[(h.action, h.text) for h in heard.all()[start:]]}")
+        assert not any(h.action == "launch" for h in heard.all()[start:])
+        page.get_by_text("“give me the red can”: asked about Red can.").first.wait_for(timeout=10000)
+        screenshot(page, "speech-ask-first")
+        page.get_by_role("button", name="Start a task at once").click()
+        page.get_by_text("A task heard now starts at once.").wait_for(timeout=10000)
+        assert http(kitchen_voice, "GET", "/api/voice") == {"confirm": False}

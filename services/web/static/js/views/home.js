@@ -42,6 +42,16 @@ export default {
         el('a', { href: '/api/export.zip', download: 'asibot-user-files.zip', class: 'button-link' }, 'Export my files'),
         el('label', {}, 'Import ASIBOT files: ', upload)),
       report));
+    // A phone or a tablet: the address (and its QR code) when the page serves the LAN.
+    const phone = el('section', { class: 'panel', 'aria-label': 'Phone or tablet' }, el('h2', {}, 'Use a phone or a tablet'));
+    root.append(phone);
+    api.get('/api/phone').then((p) => {
+      phone.append(el('p', {}, p.text));
+      if (!p.lan) return;
+      phone.append(el('img', { class: 'qr', src: '/api/phone/qr.png', width: '264', height: '264',
+        alt: `QR code of the address ${p.urls[0]}` }));
+      for (const url of p.urls) phone.append(el('p', { class: 'readout' }, url));
+    }).catch((e) => phone.append(el('p', {}, `How to reach this page from a phone is not known: ${e.message}`)));
     const update = () => {
       const r = chosenRobot();
       status.textContent = r ? `Commanding ${r.id} (${r.simulated ? 'simulated' : 'real'} ${r.arm || 'robot'}).`

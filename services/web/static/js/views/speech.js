@@ -37,8 +37,19 @@ function micPanel() {
   });
   show(listening(), '');
   draw();
+  // Ask yes first: a task heard starts only after "yes" (the voice service keeps the choice).
+  const askFirst = [[false, 'Start a task at once'], [true, 'Ask me "yes" first']].map(([confirm, label]) => el('button', {
+    type: 'button', dataset: { confirm: String(confirm) }, disabled: true,
+    onclick: () => attempt(async () => shownConfirm(await api.put('/api/voice', { confirm })),
+      confirm ? 'A task heard now starts after you say "yes".' : 'A task heard now starts at once.'),
+  }, label));
+  const shownConfirm = (s) => askFirst.forEach((b) => { b.disabled = false; b.setAttribute('aria-pressed', String(b.dataset.confirm === String(s.confirm))); });
+  const askNote = el('p', { class: 'muted' });
+  api.get('/api/voice').then(shownConfirm).catch((e) => { askNote.textContent = e.message; });
   const panel = el('section', { class: 'panel', 'aria-label': 'Microphone' }, el('h2', {}, 'Microphone'),
-    el('div', { class: 'row' }, button), state, el('h3', {}, 'Heard'), list);
+    el('div', { class: 'row' }, button), state,
+    el('div', { class: 'row setting', role: 'group', 'aria-label': 'When a task is heard' }, el('span', { class: 'label' }, 'When a task is heard'), askFirst),
+    askNote, el('h3', {}, 'Heard'), list);
   return { panel, unmount: () => { offListen(); offHeard(); } };
 }
 
