@@ -6,9 +6,9 @@ Rows (each beside a reference measured in the same run):
 - arm state from the driver to the page, p50/p99, beside the driver to a plain bus subscriber;
 - jog press (pointer down on a hold-to-move button) to the first arm command, p50/p99, beside a
   Python program's movjv call to the first arm command;
-- handheld pointer (the Pointer tab, a simulated phone's tilt): Forward pressed (Space, the
-  dead-man toggled on) to the first arm command, and a tilt report to the first arm command
-  that follows it, p50/p99, beside a Python program's `pointer` call to the first arm command;
+- handheld pointer (the Pointer tab, a simulated phone's tilt): the dead-man toggled on (Space)
+  to the first arm command, and a tilt report to the first arm command that follows it,
+  p50/p99, beside a Python program's `pointer` call to the first arm command;
 - page weight and load time, beside the npm packages' share.
 
 Times in the browser and in this process are both the machine's wall clock (the browser's
@@ -172,8 +172,8 @@ def main() -> None:
 
 
 def pointer_rows(page, bus, client: CartesianClient, n: int) -> list[tuple]:
-    """The Pointer tab with a phone that reports its tilt every 20 ms: Forward pressed to the
-    first arm command; a tilt report to the first arm command after it (the page sends one
+    """The Pointer tab with a phone that reports its tilt every 20 ms: the dead-man switched on
+    to the first arm command; a tilt report to the first arm command after it (the page sends one
     report a beat); a Python `pointer` call to the first arm command."""
     commands: list[float] = []
     sub = bus.subscribe(keys.arm_command(ROBOT), ArmCommand, lambda m: commands.append(time.time() * 1000))
@@ -184,19 +184,20 @@ def pointer_rows(page, bus, client: CartesianClient, n: int) -> list[tuple]:
         document.addEventListener('keydown', (e) => { if (e.key === ' ') window.__keys.push(performance.timeOrigin + performance.now()); }, true); }""")
     page.goto(page.url.split("#")[0] + "#pointer")
     page.wait_for_selector("text=Motion control")
-    for name in ("Phone tilt", "Tap the dead-man on and off", "Dead-man: off"):
+    for name in ("Phone tilt", "Tap the dead-man on and off"):
         page.get_by_role("button", name=name, exact=True).focus()
         page.keyboard.press("Space")
     press, report, reference = [], [], []
     for _ in range(n):
         wait_until(lambda: _idle(client), timeout=10)
         commands.clear()
-        page.get_by_role("button", name="Forward", exact=True).focus()
-        page.keyboard.down("Space")
+        page.get_by_role("button", name="Dead-man: off", exact=True).focus()
+        page.keyboard.press("Space")                       # on: the tool follows the phone
         wait_until(lambda: commands, timeout=5)
         page.wait_for_timeout(300)
-        page.keyboard.up("Space")
-        pressed = page.evaluate("window.__keys")[-1]
+        page.get_by_role("button", name="Dead-man: on", exact=True).focus()
+        page.keyboard.press("Space")                       # off: the arm stops
+        pressed = page.evaluate("window.__keys")[-2]
         press.append(commands[0] - pressed)
         reports = page.evaluate("window.__reports")
         # each command after the first follows the latest report sent before it
@@ -215,8 +216,8 @@ def pointer_rows(page, bus, client: CartesianClient, n: int) -> list[tuple]:
         bus.call(keys.cart_rpc(ROBOT, "pointer"), {"deadman": False}, timeout=5)
         time.sleep(0.3)
     sub.close()
-    return [("pointer: Forward press to first arm command p50", "ms", pct(press, 50), "pointer from Python p50", pct(reference, 50), ""),
-            ("pointer: Forward press to first arm command p99", "ms", pct(press, 99), "pointer from Python p99", pct(reference, 99), ""),
+    return [("pointer: dead-man on to first arm command p50", "ms", pct(press, 50), "pointer from Python p50", pct(reference, 50), ""),
+            ("pointer: dead-man on to first arm command p99", "ms", pct(press, 99), "pointer from Python p99", pct(reference, 99), ""),
             ("pointer: tilt report to arm command p50", "ms", pct(report, 50), "the page's beat", float(BEAT_MS), ""),
             ("pointer: tilt report to arm command p99", "ms", pct(report, 99), "", "", "")]
 

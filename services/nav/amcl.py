@@ -167,6 +167,10 @@ class Amcl:
         noise = self.rng.standard_normal((n, 3)) * np.sqrt([cxx, cyy, caa])
         self.poses = np.c_[pose.x + noise[:, 0], pose.y + noise[:, 1], wrap_array(pose.theta + noise[:, 2])]
         self.weights = np.full(n, 1.0 / n)
+        # `pose` is where the robot is now, whatever the odometry said before: the next reading
+        # is the new reference (a base driver that restarted, or a sim reset, zeroes its
+        # odometry; the jump must not carry the new pose across the map)
+        self._odom = None
         self._restart()
 
     def global_localization(self) -> None:

@@ -10,9 +10,9 @@ mapping lives here once and the page holds no unit or gain. The seed's Wii space
   leads the tool's pitch by up to `stick_lead` degrees, so it turns while the stick is held;
 - the arm turns about its base with the device's roll (a phone tipped left turns it to the
   left), at a rate that grows past a dead band, up to `max_yaw`;
-- forward moves the tip along the tool, backward away, both together only re-orient it, and
-  neither keeps the tip where it is: nothing moves without the dead-man (held or, as the seed's
-  users preferred, toggled on the page).
+- forward moves the tip along the tool, backward away; with neither (or both) the tip stays
+  where it is and only the tool turns with the device. Nothing moves without the dead-man (held
+  or, as the seed's users preferred, toggled on the page).
 
 A reading with a value that is not a finite number in its range is refused with a sentence,
 and nothing moves. The page stops the arm itself when the device stops reporting, the page
@@ -38,7 +38,7 @@ class PointerSettings:
     deadband: float = 8.0          # deg of roll (phone) before the arm turns
     yaw_gain: float = 1.5          # deg/s of base turn per deg of roll past the dead band
     max_yaw: float = 45.0          # deg/s
-    pitch_limit: float = 80.0      # deg of device pitch that counts (tool from 10 to 170 deg)
+    pitch_limit: float = 90.0      # deg of device pitch that counts: a phone on edge points the tool straight up or down
     stick_deadband: float = 0.15   # of a gamepad stick's travel
     stick_lead: float = 12.0       # deg the tool's pitch target leads it at full stick
     speed: float = 0.05            # m/s along the tool (the seed's trajectoryRefSpeed)
@@ -102,9 +102,9 @@ class PointerMapping:
     def request(self, reading: DeviceReading, tool_pitch: float | None) -> dict[str, Any] | None:
         """`tool_pitch`: the tool's rot(y') now (deg), which a gamepad's stick leads."""
         s = self.settings
-        if not reading.deadman or not (reading.forward or reading.backward):
+        if not reading.deadman:
             return None
-        direction = "hold" if reading.forward and reading.backward else "forward" if reading.forward else "backward"
+        direction = "hold" if reading.forward == reading.backward else "forward" if reading.forward else "backward"
         if reading.source == "phone":
             yaw = -s.yaw_gain * _past(reading.roll, s.deadband)      # tipped left (negative roll): counter-clockwise
             pitch: float | None = 90.0 - max(-s.pitch_limit, min(s.pitch_limit, reading.pitch))

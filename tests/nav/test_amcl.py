@@ -158,3 +158,19 @@ def test_bad_poses_are_sentences_and_change_nothing(apartment, station):
     with pytest.raises(NavError, match="not finite"):
         amcl.update(Pose(math.inf, 0.0, 0.0), None)
     assert np.array_equal(amcl.poses, before)
+
+
+def test_set_pose_holds_when_the_odometry_was_reset_meanwhile(apartment, station):
+    """A sim reset (or a base driver that restarted) zeroes the odometry; "I am here" then must
+    put the robot there, not there plus the odometry's jump."""
+    sim = TinySim(apartment.grid, pose=station, odom=Pose(0.0, 0.0, 0.0), seed=4)
+    amcl = Amcl(apartment.grid, seed=4)
+    amcl.set_pose(station)
+    drive(sim, amcl, 0.3, 0.0, 6.0)                     # odometry ~1.8 m from zero
+    sim.teleport(station)
+    sim.odom = Pose(0.0, 0.0, 0.0)                      # reset with the world
+    amcl.set_pose(station)
+    assert amcl.pose(sim.odom).distance(station) < 0.1      # the particles spread about it
+    drive(sim, amcl, 0.0, 0.0, 1.0)
+    d, a = error(sim, amcl)
+    assert d < 0.1 and a < math.radians(5)

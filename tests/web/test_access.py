@@ -632,7 +632,7 @@ def phone_with_deadman_on(page, beta: float, gamma: float) -> None:
     page.evaluate(f"window.__tilt = {{ beta: {beta}, gamma: {gamma} }}")
     page.wait_for_selector(f"text=Phone: pitch {beta:g}°, roll {gamma:g}°")
     press_button(page, "Dead-man: off")
-    page.wait_for_selector("text=Dead-man on: press Forward or Back to move.")
+    page.wait_for_selector("text=Dead-man on: the tool turns with the device")
 
 
 def test_motion_control_is_off_until_chosen_and_tilting_then_moves_nothing(pointer, kitchen):
@@ -663,8 +663,17 @@ def test_a_tilted_phone_with_the_toggled_deadman_drives_the_tip_and_stops_when_l
         screenshot(page, "pointer-phone-moving")
     finally:
         page.keyboard.up("Space")
+    # let go, the phone level: the tip holds where it is (the tool still follows the phone)
+    page.evaluate("window.__tilt = { beta: 0, gamma: 0 }")
+
+    def holding() -> bool:
+        a = stat(kitchen)["point"]
+        page.wait_for_timeout(300)
+        return math.dist(a[:3], stat(kitchen)["point"][:3]) < 0.002
+    wait_until(holding, timeout=5, message="letting go of Forward did not stop the tip")
+    press_button(page, "Dead-man: on")                                   # off
     wait_until(lambda: stat(kitchen)["state"] == "not_controlling", timeout=2, interval=0.05,
-               message="letting go of Forward did not stop the arm")
+               message="the dead-man off did not stop the arm")
 
 
 @pytest.mark.parametrize("cut, sentence", [
@@ -703,3 +712,92 @@ def test_a_gamepad_moves_the_tip_while_its_deadman_is_held(pointer, kitchen):
     page.evaluate("window.__pad = { axes: [0, 0, 0, 0], pressed: [7] }")     # let go of the dead-man
     wait_until(lambda: stat(kitchen)["state"] == "not_controlling", timeout=2, interval=0.05,
                message="releasing the gamepad's dead-man did not stop the arm")
+
+
+# The kitchen's arm mount in the world (services/sim/worlds/kitchen.xml: station + arm_mount site).
+MOUNT = (-0.2, 0.0, 0.94)
+#: How high above the can's centre the tool's point grasps it from above (the wizard's at_can).
+GRASP_ABOVE = 0.07
+#: The height (arm frame, m) at which the phone user brings the tool over the can.
+OVER_THE_CAN = 0.6
+
+
+class PhoneHand:
+    """A person holding the simulated phone on the Pointer tab, watching the arm (its tool point
+    from the kinematics service) and tilting, with the keyboard for the buttons."""
+
+    def __init__(self, page, kitchen) -> None:
+        self.page, self.kitchen = page, kitchen
+        self.held: str | None = None
+
+    def point(self) -> list[float]:
+        return stat(self.kitchen)["point"]
+
+    def tilt(self, beta: float, gamma: float) -> None:
+        self.page.evaluate(f"window.__tilt = {{ beta: {beta}, gamma: {gamma} }}")
+
+    def hold(self, button: str | None) -> None:
+        """Hold Forward or Back (Space down on it), or let go (None)."""
+        if self.held == button:
+            return
+        if self.held:
+            self.page.keyboard.up("Space")
+        self.held = button
+        if button:
+            self.page.get_by_role("button", name=button, exact=True).focus()
+            self.page.keyboard.down("Space")
+
+    def facing(self, azimuth_deg: float) -> float:
+        """The roll that turns the arm toward `azimuth_deg` (0 when within a degree)."""
+        err = azimuth_deg - math.degrees(azimuth(self.point()))
+        return 0.0 if abs(err) < 1.0 else -math.copysign(min(90.0, 8.0 + abs(err)), err)
+
+    def until(self, done, beta: float, button: str | None, azimuth_deg: float, timeout: float, what: str) -> None:
+        deadline = time.monotonic() + timeout
+        while not done(self.point()):
+            assert time.monotonic() < deadline, f"{what}: not done within {timeout} s; the tool is at {self.point()}"
+            self.tilt(beta, self.facing(azimuth_deg))
+            self.hold(button)
+            self.page.wait_for_timeout(100)
+        self.hold(None)
+        self.tilt(beta, 0.0)
+
+
+def test_the_red_can_is_fetched_by_tilting_a_phone(pointer, kitchen):
+    """The issue's "done when": no mouse, a phone's tilt and its buttons (by keyboard) only."""
+    page = pointer
+    can = kitchen.bus.call(keys.driver_rpc(ROBOT, "object_pose"), {"name": "red_can"})["pos"]
+    target = [c - m for c, m in zip(can, MOUNT)]                        # the can in the arm's frame
+    target[2] += GRASP_ABOVE
+    az, radius = math.degrees(math.atan2(target[1], target[0])), math.hypot(target[0], target[1])
+    hand = PhoneHand(page, kitchen)
+    press_button(page, "Open gripper")
+    phone_with_deadman_on(page, 0, 0)                                   # the tool follows the phone
+    # turn toward the can, the tool level
+    hand.until(lambda p: abs(math.degrees(azimuth(p)) - az) < 1.5 and abs(p[3] - 90.0) < 2.0, 0, None, az, 30,
+               "turning toward the can")
+    # up to where the arm can both reach over the can with a level tool and point it down there
+    # (lower, the elbow would fold past its limit; higher, the wrist would be out of reach):
+    # the tool pitched down and out, Back draws the tip up and in
+    hand.until(lambda p: abs(p[3] - 135.0) < 2.0, -45, None, az, 20, "pitching the tool down and out")
+    hand.until(lambda p: p[2] > OVER_THE_CAN, -45, "Back", az, 30, "drawing up and in")
+    hand.until(lambda p: abs(p[3] - 90.0) < 2.0, 0, None, az, 20, "levelling the tool")
+    # in or out along the level tool (it points away from the base), over the can
+    if reach(hand.point()) > radius:
+        hand.until(lambda p: reach(p) < radius + 0.005, 0, "Back", az, 30, "drawing in over the can")
+    else:
+        hand.until(lambda p: reach(p) > radius - 0.005, 0, "Forward", az, 30, "reaching out over the can")
+    # the phone on edge, top down: the tool points down, the tip stays
+    hand.until(lambda p: abs(p[3] - 180.0) < 2.0, -90, None, az, 20, "pointing the tool down")
+    # down along the tool to the can
+    hand.until(lambda p: p[2] < target[2] + 0.005, -90, "Forward", az, 30, "going down to the can")
+    screenshot(page, "pointer-at-the-can")
+    press_button(page, "Dead-man: on")                                  # off: the arm holds still
+    press_button(page, "Close gripper")
+    page.get_by_text("Gripper closed: holding.").wait_for(timeout=10000)
+    press_button(page, "Dead-man: off")
+    low = hand.point()[2]
+    hand.until(lambda p: p[2] > low + 0.10, -90, "Back", az, 20, "lifting the can")    # back: up along the tool
+    press_button(page, "Dead-man: on")
+    lifted = kitchen.bus.call(keys.driver_rpc(ROBOT, "object_pose"), {"name": "red_can"})["pos"]
+    assert lifted[2] > can[2] + 0.08, f"the can is at {lifted}, it was at {can}"

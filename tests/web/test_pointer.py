@@ -33,6 +33,7 @@ def test_a_phone_held_flat_points_the_tool_ahead_and_raising_its_top_points_it_u
     assert MAP.request(phone(0.0), None) == {"deadman": True, "direction": "forward", "yaw": 0.0, "speed": S.speed, "pitch": 90.0}
     assert MAP.request(phone(30.0), None)["pitch"] == 60.0
     assert MAP.request(phone(-30.0), None)["pitch"] == 120.0
+    assert MAP.request(phone(-90.0), None)["pitch"] == 180.0                     # on edge, top down: straight down
     assert MAP.request(phone(170.0), None)["pitch"] == 90.0 - S.pitch_limit     # past the limit: held there
 
 
@@ -44,9 +45,10 @@ def test_tipping_the_phone_turns_the_arm_past_a_dead_band():
     assert MAP.request(phone(roll=-90), None)["yaw"] == S.max_yaw
 
 
-def test_nothing_moves_without_the_deadman_and_a_direction_and_both_only_turn_the_tool():
+def test_nothing_moves_without_the_deadman_and_without_a_direction_only_the_tool_turns():
     assert MAP.request(phone(deadman=False), None) is None
-    assert MAP.request(phone(forward=False), None) is None
+    assert MAP.request(phone(deadman=False, roll=-40.0), None) is None
+    assert MAP.request(phone(forward=False), None)["direction"] == "hold"
     assert MAP.request(phone(forward=False, backward=True), None)["direction"] == "backward"
     assert MAP.request(phone(forward=True, backward=True), None)["direction"] == "hold"
 

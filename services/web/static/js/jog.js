@@ -126,3 +126,14 @@ export function stopButton() {
     onclick: () => state.chosen && attempt(() => api.post(`/api/robots/${state.chosen}/stop`)),
   }, 'Stop arm');
 }
+
+// Open and close the gripper of the robot the page commands (the Cartesian and Pointer tabs).
+export function grip(close) {
+  return attempt(() => api.post(`/api/robots/${state.chosen}/gripper`, { close }),
+    close ? (r) => (r.holding ? 'Gripper closed: holding.' : 'Gripper closed: empty.') : 'Gripper open.');
+}
+
+export function gripperButtons() {
+  return [el('button', { type: 'button', onclick: () => grip(false) }, 'Open gripper'),
+    el('button', { type: 'button', onclick: () => grip(true) }, 'Close gripper')];
+}

@@ -1,7 +1,7 @@
 // Cartesian tab: jog the tool along x, y, z and its two rotations, move to (or by) a typed point
 // with movj or movl as on the seed, open and close the gripper, capture points.
 import { api, chosenRobot, state } from '../api.js';
-import { jogGrid, modeAndSpeed, stopButton } from '../jog.js';
+import { gripperButtons, jogGrid, modeAndSpeed, stopButton } from '../jog.js';
 import { pointsPanel } from '../points.js';
 import { attempt, el } from '../ui.js';
 import { viewer } from '../viewer3d.js';
@@ -35,9 +35,7 @@ export function cartesianControls() {
   };
   const panel = el('section', { class: 'panel', 'aria-label': 'Cartesian jogging' },
     el('h2', {}, 'Move the tool'), modeAndSpeed(), jog.grid,
-    el('div', { class: 'row' }, stopButton(),
-      el('button', { type: 'button', 'aria-label': 'Open gripper', onclick: () => attempt(() => api.post(`/api/robots/${state.chosen}/gripper`, { close: false }), 'Gripper open.') }, 'Open gripper'),
-      el('button', { type: 'button', 'aria-label': 'Close gripper', onclick: () => attempt(() => api.post(`/api/robots/${state.chosen}/gripper`, { close: true }), (r) => (r.holding ? 'Gripper closed: holding.' : 'Gripper closed: empty.')) }, 'Close gripper')),
+    el('div', { class: 'row' }, stopButton(), gripperButtons()),
     el('h3', {}, 'Move to a point'), form,
     el('div', { class: 'row' }, el('label', {}, 'Origin ', origin), el('label', {}, 'Movement ', kind)),
     el('div', { class: 'row' },

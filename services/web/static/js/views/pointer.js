@@ -1,6 +1,6 @@
 // Pointer tab: the seed's Wii Remote today. A phone's tilt or a gamepad moves the arm's tip: the
 // tool's pitch follows the device's pitch, the arm turns about its base with the device's roll,
-// Forward and Back move along the tool, both together only re-orient it. Nothing moves without
+// Forward and Back move along the tool; without them only the tool turns. Nothing moves without
 // the dead-man, held or (the seed's users preferred it) toggled on and off.
 //
 // The page sends what the device reports, as it is; the server maps it (asibot.web.pointer), so
@@ -8,6 +8,7 @@
 // reporting for the server's silence time, the page loses focus or motion control is switched
 // off (WCAG 2.5.4: Off is the default, and every motion has a button elsewhere).
 import { chosenRobot, onMessage, sendLive, state } from '../api.js';
+import { grip, gripperButtons } from '../jog.js';
 import { el, fmt, notify } from '../ui.js';
 
 const prefs = {
@@ -19,8 +20,9 @@ const prefs = {
 
 const SOURCE_LABELS = { off: 'Off', phone: 'Phone tilt', gamepad: 'Gamepad' };
 // The standard gamepad mapping: A is the dead-man, the right shoulder and trigger go forward, the
-// left ones back; the left stick tilts (up: nose up, right: turn right).
-const PAD = { deadman: [0], forward: [5, 7], backward: [4, 6] };
+// left ones back, X closes the gripper and B opens it; the left stick tilts (up: nose up, right:
+// turn right).
+const PAD = { deadman: [0], forward: [5, 7], backward: [4, 6], open: [1], close: [2] };
 
 function pressed(gamepad, indices) { return indices.some((i) => gamepad.buttons[i] && gamepad.buttons[i].pressed); }
 
@@ -38,6 +40,7 @@ export default {
     const pad = { forward: false, backward: false };                       // the gamepad's buttons
     let tilt = null;              // { pitch, roll, at } of the phone's last report
     let padDeadmanWas = false;    // the gamepad's dead-man button, last beat (for toggling)
+    let padGripWas = null;        // the gamepad's open/close buttons, last beat (a press grips once)
     let streaming = false;
     let lastWhy = '';
 
@@ -143,10 +146,9 @@ export default {
       backward.setAttribute('aria-pressed', String(back));
       status.textContent = off ? 'Motion control is off: tilting the phone or the gamepad moves nothing.'
         : !input.deadman ? 'Dead-man off: nothing moves.'
-          : fwd && back ? 'Turning the tool with the device (the tip stays).'
+          : fwd === back ? 'Dead-man on: the tool turns with the device; press Forward or Back to move along it.'
             : fwd ? 'Moving forward along the tool; tilt to steer.'
-              : back ? 'Moving back along the tool; tilt to steer.'
-                : 'Dead-man on: press Forward or Back to move.';
+              : 'Moving back along the tool; tilt to steer.';
     }
 
     // --- the beat ---------------------------------------------------------------------------
@@ -168,6 +170,9 @@ export default {
           padDeadmanWas = dm;
           pad.forward = pressed(gamepad, PAD.forward);
           pad.backward = pressed(gamepad, PAD.backward);
+          const gripNow = pressed(gamepad, PAD.close) ? 'close' : pressed(gamepad, PAD.open) ? 'open' : null;
+          if (gripNow && gripNow !== padGripWas && chosenRobot()) grip(gripNow === 'close');
+          padGripWas = gripNow;
           sync();
         }
       }
@@ -183,7 +188,7 @@ export default {
       if (!reading || !robot) { if (streaming) stop(''); return; }
       const fwd = input.forward || pad.forward;
       const back = input.backward || pad.backward;
-      if (!(input.deadman && (fwd || back))) { if (streaming) stop(''); return; }
+      if (!input.deadman) { if (streaming) stop(''); return; }
       sendLive({ type: 'point', robot: robot.id, source, ...reading, deadman: true, forward: fwd, backward: back });
       streaming = true;
       lastWhy = '';
@@ -198,13 +203,14 @@ export default {
     root.replaceChildren(
       el('section', { class: 'panel', 'aria-label': 'Handheld pointer' },
         el('h2', {}, 'Move the arm with a phone or a gamepad'),
-        el('p', {}, 'Tilt forward and back to point the tool down and up; tip left and right to turn the arm. Forward and Back move the tip along the tool; both together only turn the tool.'),
+        el('p', {}, 'With the dead-man on, the tool follows the device: tilt it forward and back to point the tool down and up, tip it left and right to turn the arm. Forward and Back move the tip along the tool.'),
         el('div', { class: 'row setting', role: 'group', 'aria-label': 'Motion control' }, el('span', { class: 'label' }, 'Motion control'), sourceButtons),
         el('div', { class: 'row setting', role: 'group', 'aria-label': 'Dead-man' }, el('span', { class: 'label' }, 'Dead-man'), deadmanModes),
         status,
         el('div', { class: 'row pointer-buttons' }, deadman, backward, forward),
+        el('div', { class: 'row' }, gripperButtons()),
         deviceReadout, toolReadout,
-        el('p', { class: 'muted' }, 'Gamepad: A is the dead-man, the right shoulder or trigger moves forward, the left ones move back, the left stick tilts. A phone needs this page over HTTPS (python -m asibot.web --lan) and may ask for permission first.')),
+        el('p', { class: 'muted' }, 'Gamepad: A is the dead-man, the right shoulder or trigger moves forward, the left ones move back, the left stick tilts, X closes the gripper and B opens it. A phone needs this page over HTTPS (python -m asibot.web --lan) and may ask for permission first.')),
     );
     if (prefs.source === 'phone') window.addEventListener('deviceorientation', onTilt);
     sync();
