@@ -108,6 +108,17 @@ def parser(service: str, add_arguments: Callable[[argparse.ArgumentParser], None
     return p
 
 
+def robot_id(args: argparse.Namespace, default: str) -> str:
+    """The service's --robot (or `default`), checked once here: a ValueError that names --robot
+    and says what a robot id may be, so `build` refuses before anything starts."""
+    robot = args.robot or default
+    try:
+        keys.robot(robot)
+    except ValueError as exc:
+        raise ValueError(f"--robot: {exc}") from None
+    return robot
+
+
 class _Shutdown:
     """Turns SIGTERM/SIGINT into an Event, and enforces the shutdown budget."""
 

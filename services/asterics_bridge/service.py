@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import os
 
-from asibot import keys, runtime
+from asibot import runtime
 from asibot.bus import Bus
 
 from asibot.asterics_bridge.dispatcher import (DEFAULT_EVENTS, DEFAULT_LONGEST, DEFAULT_MENU, Dispatcher,
@@ -61,11 +61,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def build(bus: Bus, args: argparse.Namespace) -> BridgeService:
-    robot = args.robot or DEFAULT_ROBOT
-    try:
-        keys.robot(robot)
-    except ValueError as exc:
-        raise ValueError(f"--robot: {exc}") from None
+    robot = runtime.robot_id(args, DEFAULT_ROBOT)
     for name, port in (("--port", args.port), ("--http-port", args.http_port)):
         if not (0 <= port < 65536 or (name == "--http-port" and port == -1)):
             raise ValueError(f"{name} must be 0 to 65535 (0: any free port), not {port}")

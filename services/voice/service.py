@@ -29,7 +29,7 @@ from pathlib import Path
 from asibot import keys, messages, runtime
 from asibot.files import data_dir, write_atomic
 from asibot.bus import Bus
-from asibot.errors import RpcError, Unavailable, arguments
+from asibot.errors import RpcError, Unavailable, arguments, quote
 from asibot.estop import who
 from asibot.messages import AudioChunk, EStop, Event, VoiceHeard
 from asibot.voice.commands import STOP, Commands, Outcome, Stopped, Transcript
@@ -220,7 +220,7 @@ class VoiceService(runtime.Service):
         confirm = req.get("confirm")
         if confirm is not None:
             if not isinstance(confirm, bool):
-                raise RpcError("bad_request", f"confirm must be true or false; got {str(confirm)[:40]!r}. Nothing was changed.")
+                raise RpcError("bad_request", f"confirm must be true or false; got {quote(confirm, 40)}. Nothing was changed.")
             self.settings_file.parent.mkdir(parents=True, exist_ok=True)
             write_atomic(self.settings_file, json.dumps({"confirm": confirm}).encode())
             self.commands.confirm = confirm
@@ -274,11 +274,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def build(bus: Bus, args: argparse.Namespace) -> VoiceService:
-    robot = args.robot or DEFAULT_ROBOT
-    try:
-        keys.robot(robot)
-    except ValueError as exc:
-        raise ValueError(f"--robot: {exc}") from None
+    robot = runtime.robot_id(args, DEFAULT_ROBOT)
     for name, value, low, high in (("--answer-seconds", args.answer_seconds, 1.0, 60.0),
                                    ("--refresh", args.refresh, 0.05, 60.0),
                                    ("--source-timeout", args.source_timeout, 0.2, 60.0)):

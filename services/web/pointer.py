@@ -23,10 +23,10 @@ even that message is lost.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any
 
-from asibot.errors import RpcError
+from asibot.errors import RpcError, quote
 
 SOURCES = ("phone", "gamepad")
 
@@ -72,20 +72,15 @@ class DeviceReading:
             v = msg.get(name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or abs(v) > top:
                 raise RpcError("bad_request", f"The {source}'s {name} must be a number from {-top:g} to {top:g}; "
-                                              f"got {_short(v)}. Nothing moved.")
+                                              f"got {quote(v, 40)}. Nothing moved.")
             values[name] = float(v)
         flags = {}
         for name in ("deadman", "forward", "backward"):
             v = msg.get(name, False)
             if not isinstance(v, bool):
-                raise RpcError("bad_request", f"The pointer's {name} must be true or false; got {_short(v)}.")
+                raise RpcError("bad_request", f"The pointer's {name} must be true or false; got {quote(v, 40)}.")
             flags[name] = v
         return cls(source, values["pitch"], values["roll"], **flags)
-
-
-def _short(v: Any) -> str:
-    text = repr(v)
-    return text if len(text) <= 40 else text[:37] + "..."
 
 
 def _past(value: float, band: float) -> float:
@@ -118,6 +113,3 @@ class PointerMapping:
         if pitch is not None:
             req["pitch"] = max(-180.0, min(180.0, pitch))
         return req
-
-    def as_json(self) -> dict[str, Any]:
-        return asdict(self.settings)
