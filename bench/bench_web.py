@@ -9,6 +9,8 @@ Rows (each beside a reference measured in the same run):
 - handheld pointer (the Pointer tab, a simulated phone's tilt): the dead-man toggled on (Space)
   to the first arm command, and a tilt report to the first arm command that follows it,
   p50/p99, beside a Python program's `pointer` call to the first arm command;
+- one-switch scanning (the Launcher, Space as the switch): a tap to the ring moved onto the
+  next element, p50/p99, beside the browser's frame time;
 - page weight and load time, beside the npm packages' share.
 
 Times in the browser and in this process are both the machine's wall clock (the browser's
@@ -161,6 +163,7 @@ def main() -> None:
             csub.close()
             rows.append(("jog press to first arm command p50", "ms", pct(jog, 50), "movjv from Python p50", pct(reference, 50), ""))
             rows.append(("jog press to first arm command p99", "ms", pct(jog, 99), "movjv from Python p99", pct(reference, 99), ""))
+            rows += switch_rows(page, n_jogs * 3)
             rows += pointer_rows(page, bus, client, n_jogs)
             client.close()
         finally:
@@ -220,6 +223,46 @@ def pointer_rows(page, bus, client: CartesianClient, n: int) -> list[tuple]:
             ("pointer: dead-man on to first arm command p99", "ms", pct(press, 99), "pointer from Python p99", pct(reference, 99), ""),
             ("pointer: tilt report to arm command p50", "ms", pct(report, 50), "the page's beat", float(BEAT_MS), ""),
             ("pointer: tilt report to arm command p99", "ms", pct(report, 99), "", "", "")]
+
+
+def switch_rows(page, n: int) -> list[tuple]:
+    """One-switch step scanning on the Launcher: a tap of Space to the ring moved onto the next
+    element (its step changed in the page), beside the page's frame time."""
+    page.evaluate("(s) => localStorage.setItem('asibot.access', JSON.stringify(s))",
+                  {"format": "asibot-access-settings", "version": 1, "enabled": True})
+    # The scanner's own capturing listener swallows the switch: ours must come first, so it is
+    # installed before the page's scripts run.
+    page.add_init_script("""window.__taps = [];
+        window.addEventListener('keydown', (e) => { if (e.key === ' ') window.__taps.push(performance.now()); }, true);""")
+    page.goto(page.url.split("#")[0] + "#launcher")
+    page.reload()
+    page.wait_for_selector("body[data-ready=true]")
+    page.wait_for_selector(f".robot-card[data-robot={ROBOT}]", timeout=15000)
+    page.evaluate("""() => { window.__moved = [];
+        new MutationObserver(() => window.__moved.push(performance.now()))
+            .observe(document.getElementById('scan-ring'), { attributes: true, attributeFilter: ['data-step'] }); }""")
+    step = "document.getElementById('scan-ring').dataset.step || '0'"
+    for _ in range(n):
+        before = page.evaluate(step)
+        page.keyboard.press("Space")
+        # after `rounds` rounds a tap stops the scan instead (the next one starts it again)
+        page.wait_for_function(f"(s) => ({step}) !== s || document.getElementById('scan-ring').hidden",
+                               arg=before, timeout=5000)
+        page.wait_for_timeout(50)
+    taps, moved = page.evaluate("[window.__taps, window.__moved]")
+    # a tap that stopped the scan moved nothing: the next tap's ring is not its answer
+    ends = taps[1:] + [float("inf")]
+    lag = [min(m for m in moved if t <= m < end) - t for t, end in zip(taps, ends)
+           if any(t <= m < end for m in moved)]
+    frames = page.evaluate("""() => new Promise((done) => { const t = [];
+        const f = (now) => { t.push(now); if (t.length < 61) requestAnimationFrame(f);
+                             else done(t.slice(1).map((v, i) => v - t[i])); }; requestAnimationFrame(f); })""")
+    page.evaluate("() => localStorage.removeItem('asibot.access')")
+    page.reload()                                # scanning off again for what follows
+    page.wait_for_selector("body[data-ready=true]")
+    page.wait_for_selector(f".robot-card[data-robot={ROBOT}]", timeout=15000)
+    return [("switch tap to the ring on the next element p50", "ms", pct(lag, 50), "frame time p50", pct(frames, 50), ""),
+            ("switch tap to the ring on the next element p99", "ms", pct(lag, 99), "frame time p99", pct(frames, 99), "")]
 
 
 def _answers(client: CartesianClient) -> bool:

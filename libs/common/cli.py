@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 from typing import Callable
 
-from asibot import keys, messages, navcli
+from asibot import access, keys, messages, navcli
 from asibot.bus import DEFAULT_ROUTER, ROUTER_ENV, Bus, open_router, router_endpoint
 from asibot.errors import AsibotError
 from asibot.estop import who
@@ -46,11 +46,13 @@ def _compose_path(explicit: str | None) -> Path:
 # ---------------------------------------------------------------- router
 def cmd_router(args: argparse.Namespace) -> int:
     endpoint = args.listen or os.environ.get("ASIBOT_ROUTER_LISTEN") or router_endpoint()
+    credentials = args.access or os.environ.get(access.ACCESS_ENV) or None
     stop = _stop_on_signals()
-    session = open_router(endpoint)
+    session = open_router(endpoint, credentials)
     # The router announces itself like any service, so `asibot status` shows it.
     token = session.liveliness().declare_token(keys.service("router", "main"))
-    print(f"router listening on {endpoint}", flush=True)
+    guarded = f" with access control (logins in {credentials})" if credentials else ""
+    print(f"router listening on {endpoint}{guarded}", flush=True)
     stop.wait()
     token.undeclare()
     session.close()
@@ -69,10 +71,18 @@ def cmd_up(args: argparse.Namespace) -> int:
         print(f"Something already listens on {endpoint}: is another `asibot up` running? "
               f"See `asibot status`, or set {ROUTER_ENV} to another port.", file=sys.stderr)
         return 1
+    # Hardware may be reached from other machines: its router admits logins only. `sim` and
+    # `emulated` stay open on loopback unless asked (--access, or $ASIBOT_ACCESS set).
+    secure = args.access if args.access is not None else (
+        args.profile == "real" or bool(os.environ.get(access.ACCESS_ENV)))
+    credentials = access.ensure_credentials() if secure else None
     stop = _stop_on_signals()
-    sup = Supervisor(services, endpoint, root=path.resolve().parent)
+    sup = Supervisor(services, endpoint, root=path.resolve().parent, access=credentials)
     names = ", ".join(s.name for s in services)
     sup.say("asibot", f"profile {args.profile}: {names}")
+    if credentials:
+        sup.say("asibot", f"access control on: logins in {credentials} (`{access.ACCESS_ENV}={credentials} "
+                          "asibot estop` from another shell); anonymous:anonymous may only read")
     recordings = path.resolve().parent / os.environ.get("ASIBOT_RECORDINGS", "recordings")  # as compose.yaml
     sup.say("asibot", f"router {endpoint}; recordings in {recordings}; Ctrl-C stops")
 
@@ -145,8 +155,9 @@ def cmd_estop(args: argparse.Namespace) -> int:
             print("No robot is live (no driver is running): there is nothing to stop.", file=sys.stderr)
             return 1
         reason = f"asibot estop by {_who()}"
+        by = who("asibot estop", login_of="estop")
         for robot in robots:
-            bus.latch(keys.estop(robot), messages.EStop(engaged=True, reason=reason, by=who("asibot estop")))
+            bus.latch(keys.estop(robot), messages.EStop(engaged=True, reason=reason, by=by))
         code = 0
         for robot in robots:
             engaged = _wait_for(lambda r=robot: _driver_estop(bus, r), 2.0)
@@ -160,11 +171,13 @@ def cmd_estop(args: argparse.Namespace) -> int:
 
 
 def cmd_release(args: argparse.Namespace) -> int:
+    # `by` names the login the router admitted (when it checks logins): a release from a
+    # session without the operator's is never delivered, so it is never logged either.
+    by = who("asibot release", login_of="release")
     with Bus("release", wait=args.wait) as bus:
-        bus.latch(keys.estop(args.robot), messages.EStop(engaged=False, reason="asibot release",
-                                                          by=who("asibot release")))
+        bus.latch(keys.estop(args.robot), messages.EStop(engaged=False, reason="asibot release", by=by))
         if _wait_for(lambda: _driver_estop(bus, args.robot) is False, 2.0):
-            print(f"{args.robot}: emergency stop released; it moves again only on a new motion request")
+            print(f"{args.robot}: emergency stop released by {by}; it moves again only on a new motion request")
             return 0
     print(f"{args.robot}: the release was sent, but no driver of {args.robot} confirmed it "
           "(`asibot status` lists the running services)", file=sys.stderr)
@@ -200,6 +213,7 @@ def cmd_recordings(args: argparse.Namespace) -> int:
     print(f"{'FILE':<40} {'DURATION':>9} {'MESSAGES':>9} {'TOPICS':>6}  NOTE")
     for s in found:
         note = ("not an MCAP file" if s.unreadable else
+                "live (being recorded)" if s.live else
                 "" if s.complete else "recovered (writer did not finish)")
         print(f"{s.path.name:<40} {s.duration:>8.1f}s {s.messages:>9} {len(s.counts):>6}  {note}")
         if args.verbose:
@@ -275,8 +289,9 @@ def cmd_export(args: argparse.Namespace) -> int:
 
     if not _readable_recording(args.file):
         return 1
+    stop = _stop_on_signals() if args.follow else None
     try:
-        summary = export_foxglove(args.file, args.output)
+        summary = export_foxglove(args.file, args.output, follow=args.follow, stop=stop)
     except OSError as exc:
         print(f"could not write the export ({exc.strerror or exc}): choose a folder you can write to "
               "with -o", file=sys.stderr)
@@ -287,7 +302,12 @@ def cmd_export(args: argparse.Namespace) -> int:
             print(f"    {topic:<60} {schema}")
     if summary.skipped:
         print(f"skipped {summary.skipped} messages that were not valid (see the recorder's log)")
-    if not summary.complete:
+    if summary.stopped:
+        print("stopped following on Ctrl-C: exported what was recorded until then")
+    elif summary.live and not args.follow:
+        print("the recording was still being written: exported what it held when the export began "
+              "(--follow goes on until the recording ends)")
+    elif not summary.complete:
         print("the recording ends in a truncated chunk (its writer did not finish): exported up to there")
     print("open it in Foxglove or Lichtblick: File > Open local file")
     return 0
@@ -301,6 +321,9 @@ def build_parser() -> argparse.ArgumentParser:
     up.add_argument("--profile", default="sim", choices=["sim", "emulated", "real"])
     up.add_argument("--only", nargs="+", metavar="NAME", help="start only these services (and their dependencies)")
     up.add_argument("--file", help="compose file (default: ./compose.yaml)")
+    up.add_argument("--access", action=argparse.BooleanOptionalAction, default=None,
+                    help="router with logins and access control (default: on for --profile real "
+                         f"or when ${access.ACCESS_ENV} is set)")
     up.set_defaults(func=cmd_up)
 
     st = sub.add_parser("status", help="list the running services")
@@ -310,6 +333,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser("router", help="run the Zenoh router")
     r.add_argument("--listen", help=f"endpoint (default: $ASIBOT_ROUTER_LISTEN, ${ROUTER_ENV}, {DEFAULT_ROUTER})")
+    r.add_argument("--access", metavar="FOLDER",
+                   help=f"admit only the logins of FOLDER, with their roles (default: ${access.ACCESS_ENV})")
     r.set_defaults(func=cmd_router)
 
     rp = sub.add_parser("replay", help="republish a recording on the bus")
@@ -331,6 +356,8 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("--foxglove", action="store_true", default=True,
                     help="Foxglove's JSON schemas (the only format, and the default)")
     ex.add_argument("-o", "--output", help="output file (default: foxglove/<name>.mcap beside the recording)")
+    ex.add_argument("--follow", action="store_true",
+                    help="of a recording being written: go on until it ends (or Ctrl-C), not stop at what it held")
     ex.add_argument("-v", "--verbose", action="store_true", help="list topics and their schemas")
     ex.set_defaults(func=cmd_export)
 

@@ -76,12 +76,14 @@ class _Client:
         """Engage the robot's emergency stop: it stops at once and refuses every motion until
         release(). The drivers and the controller keep it latched, so it holds after this program
         ends (asibot.estop); their events say who engaged it (this user, program and pid)."""
-        self._connected().latch(keys.estop(self.robot), EStop(engaged=True, reason=reason, by=who()))
+        self._connected().latch(keys.estop(self.robot), EStop(engaged=True, reason=reason,
+                                                                         by=who(login_of=self._bus.name)))
 
     def release(self, reason: str = "released from a program") -> None:
         """Release the emergency stop. Nothing moves by itself afterwards: the robot moves again
         only on a motion request made after the release. The drivers' events say who released it."""
-        self._connected().latch(keys.estop(self.robot), EStop(engaged=False, reason=reason, by=who()))
+        self._connected().latch(keys.estop(self.robot), EStop(engaged=False, reason=reason,
+                                                                         by=who(login_of=self._bus.name)))
 
     def reset_fault(self) -> dict:
         """Ask the robot's driver to clear a fault (re-initialise the drive that failed);

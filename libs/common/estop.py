@@ -29,20 +29,23 @@ import sys
 import threading
 from typing import Any, Callable
 
-from asibot import keys
+from asibot import access, keys
 from asibot.messages import EStop
 
 log = logging.getLogger(__name__)
 
 
-def who(program: str | None = None) -> str:
-    """"user@host (program, pid N)": who engages or releases an estop from this process."""
+def who(program: str | None = None, login_of: str | None = None) -> str:
+    """"user@host (program, pid N)": who engages or releases an estop from this process; with
+    `login_of` (the bus session's name) and a router that checks logins, " as <login>" too:
+    the part the router vouches for (asibot.access)."""
     try:
         user = getpass.getuser()
     except Exception:  # no user name in some containers
         user = f"uid {os.getuid()}" if hasattr(os, "getuid") else "someone"
     program = program or os.path.basename(sys.argv[0] or "") or "python"
-    return f"{user}@{socket.gethostname()} ({program}, pid {os.getpid()})"
+    login = access.signed_in_as(login_of) if login_of else ""
+    return f"{user}@{socket.gethostname()} ({program}, pid {os.getpid()}){login}"
 
 
 def released_by(msg: EStop) -> str:

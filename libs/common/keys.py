@@ -21,7 +21,7 @@ RPC_VERBS_NAV = ("goto", "cancel", "result", "status", "places", "save_place", "
                  "localize", "save_map", "map_start", "map_stop", "map_save")
 RPC_VERBS_PERCEPTION = ("find",)
 RPC_VERBS_TASKS = ("list", "launch", "stop", "status")
-RPC_VERBS_VOICE = ("status", "settings")
+RPC_VERBS_VOICE = ("status", "settings", "learn", "forget", "learned")
 
 
 def _chunk(value: str, what: str) -> str:
@@ -191,7 +191,8 @@ def voice_heard() -> str:
 
 
 def voice_rpc(verb: str) -> str:
-    """The voice service's verbs: `status` (the words listened for, the sources, the settings)."""
+    """The voice service's verbs: `status` (the words listened for, the sources, the settings),
+    `settings`, `learn` / `forget` / `learned` (the user's own pronunciations of their words)."""
     if verb not in RPC_VERBS_VOICE:
         raise ValueError(f"voice verb {verb!r} is not one of {', '.join(RPC_VERBS_VOICE)}")
     return f"voice/rpc/{verb}"

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 from typing import IO, Callable
 
+from asibot.access import ACCESS_ENV, ROLE_ENV
 from asibot.compose import ServiceSpec
 
 ROUTER_SERVICE = "router"
@@ -39,7 +40,9 @@ def local_command(command: list[str]) -> list[str]:
     return list(command)
 
 
-def local_environment(spec: ServiceSpec, endpoint: str) -> dict[str, str]:
+def local_environment(spec: ServiceSpec, endpoint: str, access: Path | None = None) -> dict[str, str]:
+    """The child's environment. With `access` (a credentials folder, asibot.access) the
+    router requires logins and each service logs in with the role of its own name."""
     env = dict(os.environ)
     env.update(spec.environment)
     # In containers the router is `tcp/router:7447`; here it is the loopback endpoint.
@@ -47,6 +50,12 @@ def local_environment(spec: ServiceSpec, endpoint: str) -> dict[str, str]:
     env["ASIBOT_ROUTER_LISTEN"] = endpoint
     env["ASIBOT_WEB_HOST"] = "127.0.0.1"   # a container listens on all its interfaces; here loopback only
     env["PYTHONUNBUFFERED"] = "1"
+    # A role set in the launcher's shell would give every service the same one.
+    env.pop(ROLE_ENV, None)
+    if access is None:
+        env.pop(ACCESS_ENV, None)   # an open router refuses a session that logs in
+    else:
+        env[ACCESS_ENV] = str(access)
     return env
 
 
@@ -88,8 +97,10 @@ class Supervisor:
     """Starts, watches, restarts and stops the chosen services."""
 
     def __init__(self, services: list[ServiceSpec], endpoint: str, *, root: Path | None = None,
-                 out: IO[str] | None = None, color: bool | None = None) -> None:
+                 out: IO[str] | None = None, color: bool | None = None,
+                 access: Path | None = None) -> None:
         self.endpoint = endpoint
+        self.access = access
         self.root = root or Path.cwd()
         self.out = out or sys.stdout
         self.color = self.out.isatty() if color is None else color
@@ -121,7 +132,7 @@ class Supervisor:
     def start(self, child: Child) -> None:
         cmd = local_command(child.spec.command)
         child.proc = subprocess.Popen(
-            cmd, cwd=self.root, env=local_environment(child.spec, self.endpoint),
+            cmd, cwd=self.root, env=local_environment(child.spec, self.endpoint, self.access),
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
             start_new_session=True,  # our Ctrl-C must not hit children before we decide
             preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None,

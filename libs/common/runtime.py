@@ -151,6 +151,9 @@ def run(service: ServiceModule, argv: Sequence[str] | None = None) -> int:
         bus = Bus(name, args.router, stop=shutdown.event)
     except Unavailable:
         return 0 if shutdown.event.is_set() else 1
+    except ValueError as exc:   # a bad login (ASIBOT_ROLE, a credentials file): its sentence
+        log.error("could not join the bus: %s", exc)
+        return 1
     try:
         obj = service.build(bus, args)
     except Exception as exc:

@@ -32,8 +32,8 @@ KEYBOARDS: dict[str, tuple[str, list[list[tuple[str, str, str] | None]]]] = {
         [("turn left", "turn left", MOVE_COLOUR), ("STOP", "stop", STOP_COLOUR),
          ("turn right", "turn right", MOVE_COLOUR), ("slower", "slower", SETTING_COLOUR),
          ("narrower", "narrower", SETTING_COLOUR)],
-        [("curve back left", "curve back left", MOVE_COLOUR), ("backward", "backward", MOVE_COLOUR),
-         ("curve back right", "curve back right", MOVE_COLOUR), ("turn left 90", "turn left 90", MOVE_COLOUR),
+        [("back left", "curve back left", MOVE_COLOUR), ("backward", "backward", MOVE_COLOUR),
+         ("back right", "curve back right", MOVE_COLOUR), ("turn left 90", "turn left 90", MOVE_COLOUR),
          ("turn right 90", "turn right 90", MOVE_COLOUR)],
         [("turn around", "turn around", MOVE_COLOUR), None, None, None, None],
     ]),
@@ -74,12 +74,15 @@ def _element(element_id: str, x: int, y: int, label: str, colour: str, actions: 
             "actions": actions, "type": kind, "backgroundColor": colour, "hidden": False, **extra}
 
 
-def _live(element_id: str, x: int, width: int, field: str) -> dict:
+def _live(element_id: str, x: int, width: int, label: str, field: str) -> dict:
+    """A live element showing `field` of GET /status after `label`. The label has no "{0}":
+    AsTeRICS-Grid appends the value to a label without one, but shows "{0}" itself while the
+    value is empty (no nav running, no event yet, the bridge not answering)."""
     status = {"id": f"{element_id}-http", "modelName": "GridActionHTTP", "modelVersion": MODEL_VERSION,
               "restUrl": f"{URL}/status", "method": "GET", "contentType": "text/plain",
               "acceptHeader": "application/json", "noCorsMode": False, "useCorsProxy": False,
               "isLiveAction": True}
-    return _element(element_id, x, 0, "{0}", "#ffffff", [], width, "ELEMENT_TYPE_LIVE",
+    return _element(element_id, x, 0, label, "#ffffff", [], width, "ELEMENT_TYPE_LIVE",
                     mode="MODE_ACTION_RESULT", updateSeconds=1, liveAction=status, extractMode="EXTRACT_JSON",
                     extractSelector=field, extractMappings={})
 
@@ -93,7 +96,8 @@ def _navigate(element_id: str, x: int, label: str, to: str) -> dict:
 def grid(grid_id: str) -> dict:
     label, rows = KEYBOARDS[grid_id]
     others = [g for g in KEYBOARDS if g != grid_id]
-    elements = [_live(f"{grid_id}-state", 0, 2, "text"), _live(f"{grid_id}-event", 2, 1, "last_event")]
+    elements = [_live(f"{grid_id}-state", 0, 2, "robot: ", "text"),
+                _live(f"{grid_id}-event", 2, 1, "event: ", "last_event")]
     elements += [_navigate(f"{grid_id}-to-{g}", 3 + i, KEYBOARDS[g][0], g) for i, g in enumerate(others)]
     for y, row in enumerate(rows, start=1):
         for x, cell in enumerate(row):

@@ -10,8 +10,10 @@ Phrases are compared as spoken: case, punctuation and runs of spaces do not matt
 the one reported). Every word must be in the pronunciation dictionary shipped with
 pocketsphinx (CMUdict, 126 000 English words): pocketsphinx 5 has no letter-to-sound
 fallback, and a word without a pronunciation cannot be recognised, so it is refused with a
-sentence naming it, not silently dropped. Digits are not words ("room 2" is refused:
-write "room two").
+sentence naming it, not silently dropped, unless the user taught the recogniser how they
+say it (`learned`: phone strings from their own recordings, asibot.voice.learning), which
+also adds their way of saying a word the dictionary does know. Digits are not words ("room
+2" is refused: write "room two").
 
 Building is cheap (string work plus one set lookup per word, the dictionary is read once
 per process), so the web service can rebuild on every change of words.ini.
@@ -25,7 +27,7 @@ import unicodedata
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import Iterable
+from typing import Iterable, Mapping, Sequence
 
 from asibot.errors import quote
 from asibot.voice.errors import GrammarError
@@ -90,6 +92,23 @@ def tokens(text: str) -> list[str]:
     return out
 
 
+def spoken(text: object) -> str:
+    """The phrase as said, without asking the dictionary ("Zorblat!" -> "zorblat"): the name
+    of a pronunciation learned from a recording. GrammarError: not text, empty, too long."""
+    if not isinstance(text, str):
+        raise GrammarError(f"A word or phrase must be text; got {quote(text)}.")
+    return _phrase(tokens(text), text)
+
+
+def phrase_key(text: object, lexicon: Lexicon | None = None) -> str:
+    """The name the grammar knows `text` by: `normalise` when the dictionary has every word, else
+    `spoken` (a learned pronunciation is kept under the name the grammar will look it up by)."""
+    try:
+        return normalise(text, lexicon)
+    except GrammarError:
+        return spoken(text)
+
+
 def normalise(text: object, lexicon: Lexicon | None = None) -> str:
     """The phrase as the grammar holds it ("Give me the red can!" -> "give me the red can").
 
@@ -107,6 +126,11 @@ def normalise(text: object, lexicon: Lexicon | None = None) -> str:
             words.extend(part for part in word.split("-") if part)     # "red-can": two known words
         else:
             raise GrammarError(_unknown_sentence(word, text))
+    return _phrase(words, text)
+
+
+def _phrase(words: list[str], text: str) -> str:
+    """`words` as one phrase, or GrammarError when there are none or too many."""
     if not words:
         raise GrammarError(f"The phrase {quote(text, 40)} has no words; type a word or a phrase to say.")
     if len(words) > MAX_WORDS_PER_PHRASE:
@@ -142,6 +166,14 @@ class Grammar:
     """spoken form -> the word as the user wrote it (the fixed words map to themselves)."""
     refused: dict[str, str] = field(default_factory=dict)
     """word as written -> the sentence saying why it was left out (with skip_unknown)."""
+    learned: dict[str, tuple[str, tuple[str, ...]]] = field(default_factory=dict)
+    """dictionary entry -> (the spoken phrase, its phones): the user's own pronunciations, each
+    a made-up word the recogniser must be given (`Recognizer.set_grammar` adds them)."""
+
+    def phrase_of(self, word: str) -> str:
+        """What a word of a search result says: a learned pronunciation is its whole phrase."""
+        entry = self.learned.get(word)
+        return entry[0] if entry else word
 
     def lookup(self, hypothesis: str) -> str | None:
         """The phrase a search result is ("stop stop" is "stop"), or None (a partial phrase)."""
@@ -158,9 +190,12 @@ class Grammar:
         return hashlib.sha1(self.jsgf.encode()).hexdigest()[:16]
 
 
-def build_grammar(words: Iterable[str], lexicon: Lexicon | None = None, skip_unknown: bool = False) -> Grammar:
+def build_grammar(words: Iterable[str], lexicon: Lexicon | None = None, skip_unknown: bool = False,
+                  learned: Mapping[str, Sequence[Sequence[str]]] | None = None) -> Grammar:
     """The grammar of `words` (the user's phrases) and FIXED_WORDS.
 
+    `learned` (spoken phrase -> phone strings, as `Pronunciations.all()` gives) adds the user's
+    own pronunciations as alternatives, and lets in a phrase whose words the dictionary lacks.
     A phrase that cannot be used raises GrammarError naming it, or with `skip_unknown` is
     left out and listed in `Grammar.refused` (the rest still works: one misspelt word in
     words.ini should not silence every command). An empty list gives the fixed words alone.
@@ -169,21 +204,49 @@ def build_grammar(words: Iterable[str], lexicon: Lexicon | None = None, skip_unk
         raise GrammarError("build_grammar needs a list of words or phrases, not one string; "
                            f"pass [{words!r}].")
     lexicon = lexicon or Lexicon()
+    learned = learned or {}
     phrases = {w: w for w in FIXED_WORDS}
     refused: dict[str, str] = {}
     for text in words:
         try:
-            spoken = check_phrase(text, lexicon)
+            spoken_form = _usable(text, lexicon, learned)
         except GrammarError as e:
             if not skip_unknown:
                 raise
             refused[str(text)] = str(e)
             continue
-        phrases.setdefault(spoken, text)       # "Drink" and "drink!" are one phrase: the first spelling wins
+        phrases.setdefault(spoken_form, text)       # "Drink" and "drink!" are one phrase: the first spelling wins
         if len(phrases) > MAX_PHRASES + len(FIXED_WORDS):
             raise GrammarError(f"There are more than {MAX_PHRASES} voice phrases; the recogniser takes at most "
                                f"{MAX_PHRASES} (remove some words).")
-    # normalised phrases hold only JSGF-safe characters
-    body = " | ".join(f"{p}+" if p in REPEATABLE else p for p in phrases)
-    jsgf = f"#JSGF V1.0;\ngrammar asibot;\npublic <command> = {body};\n"
-    return Grammar(jsgf, phrases, refused)
+    entries: dict[str, tuple[str, tuple[str, ...]]] = {}
+    alternatives = []
+    for p in phrases:
+        # normalised phrases and learned entries hold only JSGF-safe characters
+        said = [p] if all(w in lexicon for w in p.split()) else []
+        for phones in learned.get(p, ()):
+            entry = learned_entry(p, phones)
+            entries[entry] = (p, tuple(phones))
+            said.append(entry)
+        body = said[0] if len(said) == 1 else f"({' | '.join(said)})"
+        alternatives.append(f"{body}+" if p in REPEATABLE else body)
+    jsgf = f"#JSGF V1.0;\ngrammar asibot;\npublic <command> = {' | '.join(alternatives)};\n"
+    return Grammar(jsgf, phrases, refused, entries)
+
+
+def _usable(text: object, lexicon: Lexicon, learned: Mapping[str, Sequence[object]]) -> str:
+    """The spoken form of a phrase the grammar can hold: every word in the dictionary, or learned."""
+    try:
+        return check_phrase(text, lexicon)
+    except GrammarError:
+        key = spoken(text)
+        if learned.get(key) and key not in FIXED_WORDS:
+            return key
+        raise
+
+
+def learned_entry(phrase: str, phones: Sequence[str]) -> str:
+    """The dictionary entry of one learned pronunciation: named by its content, so the same
+    pronunciation is the same entry after any rebuild, and a new one never clashes with an old one."""
+    digest = hashlib.sha1(f"{phrase}|{' '.join(phones)}".encode()).hexdigest()[:12]
+    return f"learned-{digest}"

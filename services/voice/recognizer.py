@@ -37,7 +37,7 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -130,6 +130,7 @@ class Recognizer:
         self._names = itertools.count()
         self._grammar: Grammar | None = None
         self._search: str | None = None
+        self._entries: set[str] = set()      # learned pronunciations already in the decoder's dictionary
         self._pad = (np.random.default_rng(0).standard_normal(round(PAD_SECONDS * RATE)) * 3).astype(np.int16)
         self.set_grammar(grammar if grammar is not None else build_grammar([], self.lexicon))
 
@@ -150,20 +151,35 @@ class Recognizer:
             if self._grammar is not None and grammar.key == self._grammar.key:
                 self._grammar = grammar          # same phrases; the spellings may differ
                 return
-            name = f"g{next(self._names)}"
-            try:
-                self._decoder.add_jsgf_string(name, grammar.jsgf)
-            except (ValueError, RuntimeError):
-                raise GrammarError("The grammar could not be compiled by pocketsphinx; check that its words "
-                                   "are in the recogniser's dictionary (build it with build_grammar).") from None
+            name = self._compile(grammar)
             self._decoder.activate_search(name)
             if self._search is not None:
                 self._decoder.remove_search(self._search)
             self._search, self._grammar = name, grammar
 
-    def set_words(self, words: Iterable[str], skip_unknown: bool = False) -> Grammar:
-        """Build the grammar of `words` (plus stop, yes, no) and listen for it; returns it."""
-        grammar = build_grammar(words, self.lexicon, skip_unknown=skip_unknown)
+    def _compile(self, grammar: Grammar) -> str:
+        """Add `grammar` as a search of the decoder (its learned pronunciations first); its name."""
+        for entry, (_, phones) in grammar.learned.items():
+            if entry not in self._entries:
+                try:
+                    self._decoder.add_word(entry, " ".join(phones), False)
+                except RuntimeError:
+                    raise GrammarError(f"The learned pronunciation {' '.join(phones)!r} has phones the model does "
+                                       "not have; learn the word again.") from None
+                self._entries.add(entry)
+        name = f"g{next(self._names)}"
+        try:
+            self._decoder.add_jsgf_string(name, grammar.jsgf)
+        except (ValueError, RuntimeError):
+            raise GrammarError("The grammar could not be compiled by pocketsphinx; check that its words "
+                               "are in the recogniser's dictionary (build it with build_grammar).") from None
+        return name
+
+    def set_words(self, words: Iterable[str], skip_unknown: bool = False,
+                  learned: Mapping[str, Sequence[Sequence[str]]] | None = None) -> Grammar:
+        """Build the grammar of `words` (plus stop, yes, no, and the `learned` pronunciations)
+        and listen for it; returns it."""
+        grammar = build_grammar(words, self.lexicon, skip_unknown=skip_unknown, learned=learned)
         self.set_grammar(grammar)
         return grammar
 
@@ -171,8 +187,10 @@ class Recognizer:
         """The phrase said in `pcm16k` (16 kHz mono int16, one utterance), or None."""
         return self.decode(pcm16k).heard
 
-    def decode(self, pcm16k: np.ndarray) -> Decoding:
-        """`recognize` with the numbers and the reason for a refusal."""
+    def decode(self, pcm16k: np.ndarray, grammar: Grammar | None = None) -> Decoding:
+        """`recognize` with the numbers and the reason for a refusal; with `grammar`, against
+        that grammar once instead of the one listened for (a check, such as "would this new
+        saying of a word be heard?"), which stays as it is."""
         if not isinstance(pcm16k, np.ndarray) or pcm16k.dtype != np.int16 or pcm16k.ndim != 1:
             raise BadAudio("The recogniser takes 16 kHz mono int16 samples as a 1-D numpy array; convert the "
                            "audio with asibot.voice.audio (to_16k, Converter or read_wav) first.")
@@ -187,23 +205,31 @@ class Recognizer:
         start = time.perf_counter()
         with self._lock:
             d = self._decoder
-            grammar = self.grammar
-            # The model's feat.params switch on noise removal, whose noise estimate carries
-            # over from one utterance to the next: the same audio decoded differently
-            # depending on what came before. Reset (0.06 ms), a phrase is recognised or not
-            # on its own, and tests are reproducible.
-            d.reinit_feat()
-            d.start_utt()
-            d.process_raw(x.tobytes(), full_utt=True)
-            d.end_utt()
-            segments = [(s.word, s.start_frame, s.end_frame, s.ascore) for s in (d.seg() or [])]
-            n_frames = d.n_frames()
+            checked = self._compile(grammar) if grammar is not None and grammar.key != self.grammar.key else None
+            grammar = grammar or self.grammar
+            if checked:
+                d.activate_search(checked)
+            try:
+                # The model's feat.params switch on noise removal, whose noise estimate carries
+                # over from one utterance to the next: the same audio decoded differently
+                # depending on what came before. Reset (0.06 ms), a phrase is recognised or not
+                # on its own, and tests are reproducible.
+                d.reinit_feat()
+                d.start_utt()
+                d.process_raw(x.tobytes(), full_utt=True)
+                d.end_utt()
+                segments = [(s.word, s.start_frame, s.end_frame, s.ascore) for s in (d.seg() or [])]
+                n_frames = d.n_frames()
+            finally:
+                if checked:
+                    d.activate_search(self._search)
+                    d.remove_search(checked)
         words, ascore, word_frames = [], 0.0, 0
         covered = np.zeros(n_frames, bool)
         for word, sf, ef, asc in segments:
             if word in _FILLERS or word.startswith("["):
                 continue
-            words.append(word.split("(", 1)[0])               # "can(2)": the second pronunciation
+            words.append(grammar.phrase_of(word.split("(", 1)[0]))    # "can(2)": the second pronunciation
             covered[sf:ef + 1] = True
             word_frames += ef - sf + 1
             ascore += self._logmath.log_to_ln(self._logmath.log(asc)) if asc > 0 else -1e9
@@ -280,6 +306,14 @@ class Listener:
         self._vad = Vad(vad)
         self._on_result = on_result
         self._lock = threading.Lock()
+        self.capture: Callable[[Utterance], None] | None = None
+        """Set (with `arm`): the next utterance goes to it instead of the recogniser (a word being learned)."""
+        self._started_before = False
+
+    def arm(self, capture: Callable[[Utterance], None]) -> None:
+        """Hand the next utterance that *starts* from now on to `capture`: one under way began
+        before the person was asked to speak, and would be the end of some other phrase."""
+        self.capture, self._started_before = capture, self._vad.in_speech
 
     def feed(self, chunk: Chunk) -> list[Result]:
         """The results of the utterances that ended in `chunk` (usually none). A refused chunk
@@ -307,6 +341,11 @@ class Listener:
     def _recognise(self, utterances: list[Utterance]) -> list[Result]:
         results = []
         for u in utterances:
+            if self.capture is not None and not self._started_before:
+                capture, self.capture = self.capture, None
+                capture(u)               # a word being learned is not a command
+                continue
+            self._started_before = False
             d = self.recognizer.decode(u.samples)
             reason = d.reason
             if u.cut:

@@ -9,6 +9,9 @@ Out: `keys.tasks_rpc("launch")` for a task word, and for "stop" the latched emer
 every robot with a live driver and `keys.tasks_rpc("stop")`; `keys.voice_heard()` for every
 utterance (what was heard, what was done); `keys.voice_events(<source>)` when a source's audio
 is refused; spoken feedback with espeak-ng (`--quiet`: logged instead).
+Learning: `keys.voice_rpc("learn")` learns the user's own pronunciation of a word from a
+recording or from the next thing said on a live source (asibot.voice.learning), kept in
+`<data>/voice/pronunciations.json`; `forget` drops them, `learned` lists them.
 
 Threads: chunks are checked and queued on the bus's thread (`streams.Streams`), heard on the
 streams' worker, and acted on by a commands thread, except "stop", which is done at once on
@@ -26,15 +29,20 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
+
 from asibot import keys, messages, runtime
 from asibot.files import data_dir, write_atomic
 from asibot.bus import Bus
 from asibot.errors import RpcError, Unavailable, arguments, quote
 from asibot.estop import who
 from asibot.messages import AudioChunk, EStop, Event, VoiceHeard
+from asibot.voice.audio import AudioFormat, decode, to_16k
 from asibot.voice.commands import STOP, Commands, Outcome, Stopped, Transcript
 from asibot.voice.errors import GrammarError
-from asibot.voice.grammar import FIXED_WORDS
+from asibot.voice.grammar import FIXED_WORDS, MAX_PHRASES, Grammar
+from asibot.voice.learning import Learned, Learner
+from asibot.voice.pronunciations import Pronunciations
 from asibot.voice.recognizer import Recognizer, Result
 from asibot.voice.speaker import Speaker
 from asibot.voice.streams import FORGET_AFTER, Streams
@@ -45,6 +53,10 @@ DEFAULT_ROBOT = "asibot-sim"
 CALL_TIMEOUT, LIST_TIMEOUT = 3.0, 1.0
 #: Utterances waiting to be acted on at most (each is a phrase someone said: a handful).
 MAX_WAITING = 16
+#: A recording sent to learn a word from, s at most (the word, with quiet around it).
+MAX_RECORDING = 10.0
+#: How long `learn` listens to a live source for the word by default, and at most, s.
+LISTEN_SECONDS, MAX_LISTEN_SECONDS = 8.0, 20.0
 
 log = logging.getLogger("asibot.voice")
 
@@ -100,7 +112,8 @@ class BusRobots:
 class VoiceService(runtime.Service):
     def __init__(self, bus: Bus, robot: str, speaker: object, *, confirm: bool = False, answer_seconds: float = 8.0,
                  refresh: float = 2.0, source_timeout: float = FORGET_AFTER,
-                 recognizer: Recognizer | None = None, settings_file: Path | None = None) -> None:
+                 recognizer: Recognizer | None = None, settings_file: Path | None = None,
+                 pronunciations_file: Path | None = None) -> None:
         self.bus, self.robot, self.speaker, self.refresh_period = bus, robot, speaker, refresh
         self.recognizer = recognizer or Recognizer()
         self.grammar = self.recognizer.grammar
@@ -109,6 +122,11 @@ class VoiceService(runtime.Service):
         self.settings_file = settings_file or data_dir() / "voice" / "settings.json"
         confirm = _saved_confirm(self.settings_file, default=confirm)
         self.commands = Commands(self.robots, speaker, confirm=confirm, answer_seconds=answer_seconds)
+        self.pronunciations = Pronunciations(pronunciations_file or data_dir() / "voice" / "pronunciations.json")
+        self.learner = Learner(self.recognizer, self.pronunciations, self.words)
+        self._task_words: list[str] = []
+        self._grammar_lock = threading.Lock()    # a refresh and a word learned rebuild the grammar one at a time
+        self._relisten()                         # a learned "stop" counts before the Task Creator answers
         self.mic = None
         self._asked_by = ""
         self._stop = threading.Event()
@@ -119,6 +137,9 @@ class VoiceService(runtime.Service):
         bus.subscribe(keys.events(robot), Event, self.commands.on_event)
         bus.serve(keys.voice_rpc("status"), self._status)
         bus.serve(keys.voice_rpc("settings"), self._settings)
+        bus.serve(keys.voice_rpc("learn"), self._learn)
+        bus.serve(keys.voice_rpc("forget"), self._forget)
+        bus.serve(keys.voice_rpc("learned"), self._learned)
         self._threads = [threading.Thread(target=fn, name=name, daemon=True)
                          for fn, name in ((self._act, "voice-commands"), (self._housekeeping, "voice-tasks"))]
         for t in self._threads:
@@ -187,7 +208,9 @@ class VoiceService(runtime.Service):
         """Ask the Task Creator for the tasks; listen for their words if they changed."""
         try:
             words = self.commands.set_tasks(self.robots.tasks())
-            grammar = self.recognizer.set_words(words, skip_unknown=True)
+            with self._grammar_lock:
+                self._task_words = words
+                grammar = self._listen()
         except (RpcError, GrammarError) as exc:
             problem = f"{exc} Keeping the {len(self.grammar.phrases) - len(FIXED_WORDS)} words heard before."
             if problem != self.tasks_problem:
@@ -201,6 +224,15 @@ class VoiceService(runtime.Service):
                 log.warning("voice: the word %r is left out: %s", word, why)
         self.grammar, self.tasks_problem = grammar, ""
 
+    def _listen(self) -> Grammar:
+        """The tasks' words and the user's own pronunciations as the grammar (under _grammar_lock)."""
+        return self.recognizer.set_words(self._task_words, skip_unknown=True, learned=self.pronunciations.all())
+
+    def _relisten(self) -> None:
+        """A pronunciation was learned or forgotten: listen with it from the next phrase on."""
+        with self._grammar_lock:
+            self.grammar = self._listen()
+
     def words(self) -> list[str]:
         """The tasks' words listened for, as written."""
         return [w for w in self.grammar.phrases.values() if w not in FIXED_WORDS]
@@ -211,7 +243,8 @@ class VoiceService(runtime.Service):
         return {"robot": self.robot, "words": self.words(), "fixed": list(FIXED_WORDS),
                 "refused": dict(self.grammar.refused), "tasks": self.tasks_problem or "ok",
                 "sources": self.streams.sources(), "confirm": self.commands.confirm, "pending": self.commands.pending,
-                "live_robots": self.robots.live()}
+                "live_robots": self.robots.live(), "learned": sorted(self.pronunciations.all()),
+                "learning_from": self.streams.capturing()}
 
     def _settings(self, req: dict) -> dict:
         """{"confirm": true|false}: ask "Shall I start ...? Say yes or no." before a task heard
@@ -226,6 +259,88 @@ class VoiceService(runtime.Service):
             self.commands.confirm = confirm
         return {"confirm": self.commands.confirm}
 
+    def _learn(self, req: dict) -> dict:
+        """{"word", "data", "rate", "sample", "channels"}: learn how the user says `word` from a
+        recording (the AudioChunk fields; up to MAX_RECORDING s, quiet around the word), or
+        {"word", "source", "seconds"}: from the next thing said on that live source (a page's
+        microphone), within `seconds`. Answers the phones learned and whether the recogniser
+        would already have heard the word in this saying (`matched`)."""
+        arguments(req, "learn", "word", "data", "rate", "sample", "channels", "source", "seconds")
+        try:
+            self.learner.phrase(req.get("word"))            # a bad word is refused before any listening
+            if ("data" in req) == ("source" in req):
+                raise RpcError("bad_request", "learn needs either a recording (data, rate, sample, channels) or "
+                                              "a live source to listen to (source), not both and not neither.")
+            if "data" in req:
+                sample = req.get("sample", "int16")
+                if not isinstance(sample, str):
+                    raise RpcError("bad_request", f"sample must be 'int16' or 'float32'; got {quote(sample, 40)}. "
+                                                  "Nothing was learned.")
+                fmt = AudioFormat(req.get("rate"), sample, req.get("channels", 1))
+                decode(req["data"], fmt, max_seconds=MAX_RECORDING)       # every check, before the work
+                learned = self.learner.learn_recording(req["word"], to_16k(req["data"], fmt))
+            else:
+                learned = self.learner.learn(req["word"], self._next_utterance(req["source"], req.get("seconds")))
+        except ValueError as exc:                            # BadAudio, GrammarError, a bad source name
+            raise RpcError("bad_request", f"{exc} Nothing was learned.") from None
+        self._relisten()
+        log.info("voice: learned %r as %s (%s)", learned.phrase, " ".join(learned.phones),
+                 {True: "it matched", False: f"heard {learned.heard!r}", None: "new"}[learned.matched])
+        return _learned_reply(learned)
+
+    def _next_utterance(self, source: object, seconds: object) -> np.ndarray:
+        """The next utterance said on live `source`, which then launches nothing; RpcError timeout."""
+        keys.voice_audio(source)                                   # ValueError naming a bad source
+        if seconds is None:
+            seconds = LISTEN_SECONDS
+        if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not 1 <= seconds <= MAX_LISTEN_SECONDS:
+            raise RpcError("bad_request", f"seconds must be a number from 1 to {MAX_LISTEN_SECONDS:g}; got "
+                                          f"{quote(seconds, 40)}. Nothing was learned.")
+        got: queue.Queue = queue.Queue()
+        hand_over = got.put                  # one bound method: uncapture compares by identity
+        self.streams.capture(source, hand_over)
+        try:
+            utterance = got.get(timeout=seconds)
+        except queue.Empty:
+            raise RpcError("timeout", f"Nothing was said into {source!r} within {seconds:g} s (is its microphone "
+                                      "on?); start again and say the word. Nothing was learned.") from None
+        finally:
+            self.streams.uncapture(source, hand_over)
+        if utterance.cut:
+            raise RpcError("bad_request", f"The speech went on for more than {utterance.seconds:.0f} s without a "
+                                          "pause; say only the word or phrase. Nothing was learned.")
+        return utterance.samples
+
+    def _forget(self, req: dict) -> dict:
+        """{"word"}: forget the user's own pronunciations of `word` (the dictionary's stays)."""
+        arguments(req, "forget", "word")
+        try:
+            phrase, count = self.learner.forget(req.get("word"))
+        except ValueError as exc:
+            raise RpcError("bad_request", f"{exc} Nothing was forgotten.") from None
+        if count:
+            self._relisten()
+            log.info("voice: forgot the %d learned pronunciation(s) of %r", count, phrase)
+        return {"phrase": phrase, "forgotten": count}
+
+    def _learned(self, req: dict) -> dict:
+        """Every learned phrase and its pronunciations (phones joined by spaces); with `words`
+        (the user's words as written), also the phrase each is learned under (`phrases`), so a
+        page can show "Give me the red can!" with the sayings of "give me the red can"."""
+        arguments(req, "learned", "words")
+        words = req.get("words", [])
+        if not isinstance(words, list) or len(words) > MAX_PHRASES:
+            raise RpcError("bad_request", f"words must be a list of at most {MAX_PHRASES} words as written; got "
+                                          f"{quote(words, 40)}.")
+        phrases = {}
+        for word in words:
+            try:
+                phrases[word] = self.learner.phrase(word)
+            except ValueError:
+                continue                 # not a phrase at all (empty, too long): nothing can be learned for it
+        learned = self.pronunciations.all().items()
+        return {"words": {phrase: [" ".join(s) for s in sayings] for phrase, sayings in learned}, "phrases": phrases}
+
     def health(self) -> dict:
         return {"robot": self.robot, "words": len(self.words()), "refused": len(self.grammar.refused),
                 "tasks": self.tasks_problem or "ok", "sources": len(self.streams.sources()),
@@ -238,8 +353,15 @@ class VoiceService(runtime.Service):
         if self.mic is not None:
             self.mic.close()
         self.streams.close()
+        self.learner.reader.close()
         for t in self._threads:
             t.join(1.0)
+
+
+def _learned_reply(learned: Learned) -> dict:
+    return {"phrase": learned.phrase, "phones": " ".join(learned.phones),
+            "sayings": [" ".join(s) for s in learned.sayings], "matched": learned.matched, "heard": learned.heard,
+            "dropped": learned.dropped, "seconds": round(learned.seconds, 2)}
 
 
 def _saved_confirm(path: Path, default: bool) -> bool:

@@ -19,6 +19,9 @@ calls `on_result(source, result)` for every utterance that ends. Problems are to
 - A source that sent nothing for `forget_after` s is forgotten, its unfinished phrase dropped
   (`source_forgotten`): a tab closed, a microphone unplugged or stuck.
 - Sources are served in turn, one chunk at a time, so one cannot starve the others.
+- `capture(source, on_utterance)` hands a source's next utterance to `on_utterance` instead of
+  the recogniser (`uncapture` gives up): the word a user says to teach it
+  (asibot.voice.learning) starts no task.
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ from typing import Callable
 from asibot.voice.audio import AudioFormat, decode
 from asibot.voice.errors import BadAudio
 from asibot.voice.recognizer import Listener, Recognizer, Result
-from asibot.voice.vad import VadConfig
+from asibot.voice.vad import Utterance, VadConfig
 
 log = logging.getLogger("asibot.voice")
 
@@ -78,6 +81,7 @@ class Streams:
         self._cond = threading.Condition()
         self._sources: dict[str, _Source] = {}
         self._ready: collections.deque[str] = collections.deque()    # sources with chunks waiting, in turn
+        self._captures: dict[str, Callable[[Utterance], None]] = {}
         self._closed = False
         self._thread = threading.Thread(target=self._run, name="voice-streams", daemon=True)
         self._thread.start()
@@ -151,11 +155,31 @@ class Streams:
         except Exception:
             log.exception("voice: telling about %s failed", source)
 
+    def capture(self, source: str, on_utterance: Callable[[Utterance], None]) -> None:
+        """Hand the next utterance of `source` (one that ends from now on) to `on_utterance`, on the
+        worker, instead of recognising it."""
+        with self._cond:
+            self._captures[source] = on_utterance
+
+    def uncapture(self, source: str, on_utterance: Callable[[Utterance], None]) -> None:
+        """The caller gave up waiting: recognise `source` again, unless another capture replaced this one."""
+        with self._cond:
+            if self._captures.get(source) is on_utterance:
+                del self._captures[source]
+            s = self._sources.get(source)
+            if s is not None and s.listener.capture is on_utterance:
+                s.listener.capture = None
+
     # --- state ----------------------------------------------------------------------------
     def sources(self) -> dict[str, str]:
         """The live sources and their formats."""
         with self._cond:
             return {name: describe(s.format) for name, s in self._sources.items()}
+
+    def capturing(self) -> list[str]:
+        """The sources whose next utterance is waited for, not recognised."""
+        with self._cond:
+            return sorted(set(self._captures) | {name for name, s in self._sources.items() if s.listener.capture})
 
     def queued(self) -> float:
         """s of audio waiting, all sources."""
@@ -197,6 +221,8 @@ class Streams:
             else:
                 s.overflowing = False
             fresh, s.fresh = s.fresh, False
+            if source in self._captures:          # on the worker, between two feeds of this listener
+                s.listener.arm(self._captures.pop(source))
             return source, s, data, fresh
         return None
 
@@ -214,7 +240,10 @@ class Streams:
 
     def _feed(self, source: str, s: _Source, data: bytes, fresh: bool) -> None:
         if fresh:
+            capture = s.listener.capture
             s.listener = Listener(self.recognizer, s.format, self.vad)
+            if capture is not None:
+                s.listener.arm(capture)
         try:
             results = s.listener.feed(data)
         except BadAudio as exc:        # checked in put already; a sentence all the same

@@ -16,7 +16,7 @@ from fastapi.responses import FileResponse
 from pydantic import BaseModel, ConfigDict, Field, StrictStr
 
 from asibot.errors import RpcError
-from asibot.web.api_robots import Level, RobotId, _known, _web
+from asibot.web.api_robots import Level, Number, RobotId, _known, _web
 
 router = APIRouter(prefix="/api")
 
@@ -60,6 +60,13 @@ class Word(Strict):
     text: Name
 
 
+class Learn(Strict):
+    """Learn how the user says `word` from what the page's microphone hears next."""
+    word: Name
+    page: Annotated[StrictStr, Field(pattern=r"^[0-9a-f]{8}$", description="the listening page's id (its hello)")]
+    seconds: Annotated[Number, Field(ge=1, le=20)] = 8
+
+
 class TaskBody(Strict):
     program: Name
     words: Annotated[list[Name], Field(max_length=20)] = []
@@ -77,6 +84,14 @@ def points(request: Request) -> dict:
     return {"points": [_as_json(p) for p in data.points()], "suggested": data.suggest_point_name()}
 
 
+@router.get("/robots/{robot}/suggested-point-name",
+            summary="the name a capture would take now: at a place, above or near a taught point, or point-N")
+def suggested_point_name(robot: RobotId, request: Request) -> dict:
+    web = _web(request)
+    _known(web, robot)
+    return {"name": web.data.suggest_point_name(web.fleet.point(robot), web.fleet.place(robot))}
+
+
 @router.post("/robots/{robot}/capture", summary="capture the arm's current point (works while it moves)")
 def capture(robot: RobotId, body: Capture, request: Request) -> dict:
     web = _web(request)
@@ -84,7 +99,7 @@ def capture(robot: RobotId, body: Capture, request: Request) -> dict:
     here = web.fleet.point(robot)
     if here is None:
         raise RpcError("unavailable", f"No position from {robot} yet: is its kinematics service running?")
-    name = body.name or web.data.suggest_point_name()
+    name = body.name or web.data.suggest_point_name(here, web.fleet.place(robot))
     return _as_json(web.data.add_point(name, here))
 
 
@@ -198,6 +213,22 @@ def add_word(body: Word, request: Request) -> dict:
 def delete_word(text: str, request: Request) -> dict:
     _web(request).data.delete_word(text)
     return {}
+
+
+@router.post("/voice/learn", summary="learn how the user says a word: from what the page's microphone hears next")
+def learn_word(body: Learn, request: Request) -> dict:
+    return _web(request).voice.learn(body.word, body.page, body.seconds)
+
+
+@router.post("/voice/forget", summary="forget how the user says a word (the dictionary's pronunciation stays)")
+def forget_word(body: Word, request: Request) -> dict:
+    return _web(request).voice.forget(body.text)
+
+
+@router.get("/voice/learned", summary="the words learned by saying them, with their phones")
+def learned_words(request: Request) -> dict:
+    web = _web(request)
+    return web.voice.learned(web.data.words())
 
 
 # --- tasks -------------------------------------------------------------------------------------

@@ -171,3 +171,10 @@ class Fleet:
         with self._lock:
             view = self._robots.get(robot_id)
             return None if view is None else view.point()
+
+    def place(self, robot_id: str) -> str:
+        """The named place the robot's base stands at (nav arrived there and it has not left), or ""."""
+        with self._lock:
+            view = self._robots.get(robot_id)
+            status = None if view is None else view.nav_status
+            return status.place if status is not None and status.state == "succeeded" else ""

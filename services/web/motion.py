@@ -16,6 +16,7 @@ from typing import Any, Sequence
 from asibot import keys, robots
 from asibot.bus import Bus
 from asibot.errors import RpcError
+from asibot.estop import who
 from asibot.messages import EStop
 from asibot.poses import POINT_AXES
 from asibot.web.pointer import DeviceReading, PointerMapping
@@ -205,10 +206,12 @@ class Motion:
     # --- safety ---------------------------------------------------------------------------
     def estop(self, robot: str) -> None:
         """Engage the robot's emergency stop (latched: it holds after this server exits)."""
-        self.bus.latch(keys.estop(robot), EStop(engaged=True, reason=f"emergency stop from the {self.who}"))
+        self.bus.latch(keys.estop(robot), EStop(engaged=True, reason=f"emergency stop from the {self.who}",
+                                                by=who(f"the {self.who}", login_of=self.bus.name)))
 
     def release(self, robot: str) -> None:
-        self.bus.latch(keys.estop(robot), EStop(engaged=False, reason=f"released from the {self.who}"))
+        self.bus.latch(keys.estop(robot), EStop(engaged=False, reason=f"released from the {self.who}",
+                                                by=who(f"the {self.who}", login_of=self.bus.name)))
 
     def reset_fault(self, robot: str) -> dict:
         return self.bus.call(keys.driver_rpc(robot, "reset_fault"), timeout=CALL_TIMEOUT)

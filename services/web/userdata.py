@@ -38,6 +38,7 @@ from pathlib import Path
 from typing import Callable, ParamSpec, TypeVar
 
 from asibot.files import data_dir, fsync_dir, write_atomic
+from asibot.web import naming
 
 log = logging.getLogger(__name__)
 
@@ -371,13 +372,11 @@ class UserData:
         return points[-1]
 
     @_locked
-    def suggest_point_name(self) -> str:
-        """The first free "point-N", what a capture proposes before the user edits it."""
-        taken = {p.name for p in self.points()}
-        n = 1
-        while f"point-{n}" in taken:
-            n += 1
-        return f"point-{n}"
+    def suggest_point_name(self, here: list[float] | None = None, place: str = "") -> str:
+        """What a capture at `here` (the base at nav's `place`) proposes before the user edits
+        it: `naming.suggest` ("fridge-1", "above-can", "point-3")."""
+        points = self.points()
+        return naming.suggest((p.name for p in points), ((p.name, p.values) for p in points), here, place)
 
     @_locked
     def rename_point(self, old: str, new: str) -> Point:

@@ -5,7 +5,8 @@ samples at its AudioContext's rate (told once in a `mic` message); each frame be
 `AudioChunk` on `keys.voice_audio("web-<page id>")`, so every page is its own stream for the
 voice service. The voice service's `VoiceHeard` (everything it cut, from any source) and the
 sentences about this page's audio (`keys.voice_events`) go back to the pages as `heard` and
-`voice` messages; a page shows those of its own source.
+`voice` messages; a page shows those of its own source. `learn` asks the voice service to take
+the next thing a page's microphone hears as the user's own way of saying a word.
 """
 
 from __future__ import annotations
@@ -14,13 +15,15 @@ from typing import Any, Callable
 
 from asibot import keys
 from asibot.bus import Bus
-from asibot.errors import RpcError
+from asibot.errors import RpcError, Timeout, Unavailable
 from asibot.messages import AudioChunk, Event, VoiceHeard
 
 #: What the page may send: a browser's AudioContext runs at 8 to 48 kHz (usually 44.1 or 48);
 #: a frame is 20 to 200 ms, and never more than a second (the voice service's own limit).
 RATES = (8000, 48000)
 LONGEST_S = 1.0
+#: The voice service answers at once, except `learn`, which waits for the word to be said.
+CALL_TIMEOUT, LEARN_MARGIN = 3.0, 10.0
 
 
 class MicError(ValueError):
@@ -65,13 +68,30 @@ class VoiceRelay:
         """The voice service's settings (`confirm`: ask yes first before a task heard starts),
         changed first when `confirm` is given. RpcError unavailable when it does not run."""
         request = {} if confirm is None else {"confirm": confirm}
+        return {"confirm": self._call("settings", request, "this setting can be changed")["confirm"]}
+
+    def learn(self, word: str, page_id: str, seconds: float) -> dict[str, Any]:
+        """Learn how the user says `word` from the next thing this page's microphone hears, within
+        `seconds` (the page listens already): the phones, the sayings kept, whether it matched."""
+        return self._call("learn", {"word": word, "source": source_of(page_id), "seconds": seconds},
+                          "words can be learned", timeout=seconds + LEARN_MARGIN)
+
+    def forget(self, word: str) -> dict[str, Any]:
+        """Forget the user's own pronunciations of `word`."""
+        return self._call("forget", {"word": word}, "words can be forgotten")
+
+    def learned(self, words: list[str]) -> dict[str, Any]:
+        """{"words": {phrase: [phones, ...]}, "phrases": {word: phrase}}: the words learned by
+        saying them, and the phrase each of the user's `words` is learned under."""
+        return self._call("learned", {"words": words}, "the words learned can be shown")
+
+    def _call(self, verb: str, request: dict, then: str, timeout: float = CALL_TIMEOUT) -> dict[str, Any]:
         try:
-            return {"confirm": self.bus.call(keys.voice_rpc("settings"), request, timeout=3.0)["confirm"]}
-        except RpcError as exc:
-            if exc.code in ("unavailable", "timeout"):
-                raise RpcError("unavailable", "The voice service is not running: `asibot up` starts it "
-                                              "(service voice), and then this setting can be changed.") from None
-            raise
+            reply = self.bus.call(keys.voice_rpc(verb), request, timeout=timeout)
+        except (Unavailable, Timeout):
+            raise RpcError("unavailable", "The voice service is not running: `asibot up` starts it "
+                                          f"(service voice), and then {then}.") from None
+        return {k: v for k, v in reply.items() if k != "ok"}
 
     def _on_heard(self, heard: VoiceHeard) -> None:
         msg = {name: getattr(heard, name) for name in heard._fields if name != "stamp"}

@@ -115,6 +115,12 @@ class Client:
         return self.lines()
 
     def close(self) -> None:
+        """Disconnect for real: a plain close() while the reader thread sits in recv() leaves
+        the connection open on Linux (no FIN is sent until that recv returns)."""
+        try:
+            self.sock.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
         try:
             self.sock.close()
         except OSError:

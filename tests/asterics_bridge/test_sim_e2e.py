@@ -78,9 +78,11 @@ def post(stack, text: str) -> tuple[int, str]:
 
 
 def still(stack) -> bool:
+    """Neither driving nor turning: two ground-truth samples a moment apart."""
     a = stack.truth.pose()
     wait_until(lambda: stack.truth.pose() != a, 2)   # a newer sample
-    return moved(a, stack.truth.pose()) < 0.003
+    b = stack.truth.pose()
+    return moved(a, b) < 0.003 and abs(math.remainder(b[2] - a[2], 2 * math.pi)) < 0.002
 
 
 def test_netconnection_forward_then_stop_moves_the_pioneer(stack):

@@ -95,9 +95,9 @@ class Rig:
         self.svc = service.build(self.voice_bus, args)
         wait_until(lambda: self.svc.words(), message="the service never learnt the tasks' words")
 
-    def say(self, text: str, part: float = 1.0, tail: float = 1.0) -> None:
+    def say(self, text: str, part: float = 1.0, tail: float = 1.0, voice: tuple[str, int] = ("en-us", 140)) -> None:
         """Stream `text` (its first `part`) between quiet, as a browser: 100 ms chunks."""
-        for chunk in browser_chunks(self.speech, text, part, tail):
+        for chunk in browser_chunks(self.speech, text, part, tail, voice=voice):
             self.put(chunk)
 
     def put(self, data: np.ndarray | bytes, rate: int = 48000, sample: str = "float32", channels: int = 2) -> None:
@@ -123,8 +123,9 @@ class Rig:
             bus.close()
 
 
-def browser_chunks(speech, text: str, part: float = 1.0, tail: float = 1.0, rate: int = 48000):
-    x, r = speech.samples(text)
+def browser_chunks(speech, text: str, part: float = 1.0, tail: float = 1.0, rate: int = 48000,
+                   voice: tuple[str, int] = ("en-us", 140)):
+    x, r = speech.samples(text, *voice)
     phrase = fft_resample(x[: int(len(x) * part)] / 32768.0, r, rate)
     mono = np.concatenate([noise(0.5, -60, rate, seed=1), phrase, noise(tail, -60, rate, seed=2)])
     stereo = np.stack([mono, 0.7 * mono], axis=1).astype(np.float32)

@@ -191,6 +191,32 @@ def test_a_task_launched_with_space_alone_in_step_scanning(page, kitchen, task):
     assert last_run(kitchen)["last"]["program"] == TASK
 
 
+RED_CAN = ROOT / "libs" / "common" / "examples" / "give_me_the_red_can.py"
+
+
+def test_the_red_can_is_fetched_with_one_switch(page, kitchen, released):
+    """The issue's "done when", by one switch: the seed's task, launched with Space alone."""
+    http(kitchen, "PUT", "api/programs/give_me_the_red_can", {"text": RED_CAN.read_text()})
+    http(kitchen, "PUT", "api/tasks/Give%20me%20the%20red%20can",
+         {"program": "give_me_the_red_can", "words": [], "icon": "can.svg"})
+    try:
+        kitchen.bus.call(keys.driver_rpc(ROBOT, "reset_world"), {}, timeout=10)
+        can = kitchen.bus.call(keys.driver_rpc(ROBOT, "object_pose"), {"name": "red_can"})["pos"]
+        with_settings(page, "home", enabled=True)                      # step scanning, one switch: Space
+        tap(page)
+        choose(page, "Launcher")
+        page.wait_for_selector(READY["launcher"])
+        choose(page, "Launch Give me the red can")
+        page.get_by_text("Give me the red can: finished.").wait_for(timeout=120000)
+        screenshot(page, "scan-red-can-fetched")
+        assert last_run(kitchen)["last"]["program"] == "Give me the red can"   # the task it ran
+        lifted = kitchen.bus.call(keys.driver_rpc(ROBOT, "object_pose"), {"name": "red_can"})["pos"]
+        assert lifted[2] > can[2] + 0.08, f"the can is at {lifted}, it was at {can}"
+    finally:
+        http(kitchen, "DELETE", "api/tasks/Give%20me%20the%20red%20can")
+        kitchen.bus.call(keys.driver_rpc(ROBOT, "reset_world"), {}, timeout=10)
+
+
 def test_a_task_launched_with_space_alone_in_automatic_scanning(page, kitchen, task):
     with_settings(page, "home", enabled=True, mode="auto", intervalMs=800)
     page.keyboard.press("Space")                                       # start: the ring moves by itself

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from asibot import keys
+from asibot import messages as m
 from asibot.bus import Bus
 from asibot.messages import EStop
 from asibot.testing import wait_until
@@ -79,6 +80,30 @@ def test_capture_reads_the_arm_and_suggests_names(web, api):
     names = [x["name"] for x in api.get("/api/points").json()["points"]]
     assert p["name"] in names and "above_can" in names
     refused(api.post(f"/api/robots/{ROBOT}/capture", json={"name": "above_can"}), 409, "above_can")
+
+
+def test_a_capture_is_named_after_where_the_arm_is(web, api):
+    """Above a point the user named: "above-<name>"; with the base at a named place: "<place>-N"."""
+    client, svc, driver, server = web
+    settle(web)
+    for p in svc.web.data.points():          # only this test's points
+        svc.web.data.delete_point(p.name)
+    here = svc.fleet.point(ROBOT)
+    below = [here[0], here[1], here[2] - 0.10, *here[3:]]
+    svc.web.data.add_point("mug", below)
+    assert api.get(f"/api/robots/{ROBOT}/suggested-point-name").json() == {"name": "above-mug"}
+    assert api.post(f"/api/robots/{ROBOT}/capture", json={}).json()["name"] == "above-mug"
+    assert api.get(f"/api/robots/{ROBOT}/suggested-point-name").json() == {"name": "above-mug-2"}
+
+    status = svc.fleet.bus.publisher(keys.nav_status(ROBOT), m.NavStatus)
+    status.put(m.NavStatus(goal_id=1, state="succeeded", text="Arrived at fridge", place="fridge"))
+    wait_until(lambda: api.get(f"/api/robots/{ROBOT}/suggested-point-name").json()["name"] == "fridge-1", timeout=5)
+    status.put(m.NavStatus(goal_id=2, state="active", text="driving to desk", place="desk"))
+    wait_until(lambda: api.get(f"/api/robots/{ROBOT}/suggested-point-name").json()["name"] == "above-mug-2",
+               timeout=5)   # on its way: at no place
+    refused(api.get("/api/robots/nobody/suggested-point-name"), 503, "nobody")
+    for name in ("mug", "above-mug"):
+        svc.web.data.delete_point(name)
 
 
 def test_unreachable_and_limits_answer_with_the_controllers_sentence(api):

@@ -16,10 +16,12 @@ import logging
 import os
 import threading
 import time
+from pathlib import Path
 from typing import Any, Callable
 
 import zenoh
 
+from asibot import access
 from asibot.bus.base import Answer, Bus, Drain, Prelude
 from asibot.errors import Unavailable
 
@@ -42,39 +44,61 @@ def _base_config(mode: str) -> zenoh.Config:
     return cfg
 
 
-def client_config(endpoint: str, connect_timeout_ms: int = 1000) -> zenoh.Config:
+def client_config(endpoint: str, connect_timeout_ms: int = 1000,
+                  login: access.Login | None = None) -> zenoh.Config:
     cfg = _base_config("client")
     cfg.insert_json5("connect/endpoints", json.dumps([endpoint]))
     # Explicit, because 1.10.2 clients still fail at once by default (docs/foundation-api.md, Bus).
     cfg.insert_json5("connect/timeout_ms", json.dumps(connect_timeout_ms))
     cfg.insert_json5("connect/exit_on_failure", "true")
+    if login is not None:
+        cfg.insert_json5("transport/auth/usrpwd",
+                         json.dumps({"user": login.user, "password": login.password}))
     return cfg
 
 
-def router_config(endpoint: str) -> zenoh.Config:
+def router_config(endpoint: str, credentials: Path | str | None = None) -> zenoh.Config:
+    """A router on `endpoint`; with a credentials folder (asibot.access) it admits only the
+    logins of its dictionary and applies the roles' access control."""
     cfg = _base_config("router")
     cfg.insert_json5("listen/endpoints", json.dumps([endpoint]))
+    if credentials is not None:
+        dictionary = access.router_dictionary(credentials)
+        cfg.insert_json5("transport/auth/usrpwd", json.dumps({"dictionary_file": str(dictionary)}))
+        cfg.insert_json5("access_control", json.dumps(access.access_control()))
     return cfg
 
 
-def open_client(endpoint: str, *, wait: float | None = None,
-                stop: threading.Event | None = None) -> zenoh.Session:
+def _no_router(endpoint: str, login: access.Login | None) -> str:
+    """Why no session opened: a router that does not run looks the same as one that refused
+    the login, so name both."""
+    if login is None:
+        return (f"No Zenoh router answers at {endpoint}. Start it with `asibot router` or "
+                f"`asibot up`, or set {ROUTER_ENV}; if that router runs with access control, set "
+                f"{access.ACCESS_ENV} to its credentials folder.")
+    return (f"No Zenoh router at {endpoint} accepted the login {login.user!r} from "
+            f"{access.default_folder()}: start the router (`asibot up`), copy that folder again "
+            f"from the robot if the password changed, or unset {access.ACCESS_ENV} if the router "
+            "runs without access control.")
+
+
+def open_client(endpoint: str, *, wait: float | None = None, stop: threading.Event | None = None,
+                name: str = "") -> zenoh.Session:
     """Open a client session, retrying every second until the router answers.
 
     Retrying in Python (instead of Zenoh's endless connect) keeps the process responsive
-    to SIGTERM while it waits. `wait=None` waits forever; `stop` aborts the wait.
+    to SIGTERM while it waits. `wait=None` waits forever; `stop` aborts the wait. With
+    $ASIBOT_ACCESS set, the session logs in with the role of `name` (asibot.access).
     """
     deadline = None if wait is None else time.monotonic() + wait
+    login = access.login(name)
     announced = False
     while True:
         try:
-            return zenoh.open(client_config(endpoint))
+            return zenoh.open(client_config(endpoint, login=login))
         except zenoh.ZError as exc:
             if deadline is not None and time.monotonic() >= deadline:
-                raise Unavailable(
-                    f"No Zenoh router answers at {endpoint}. Start it with `asibot router` "
-                    f"or `asibot up`, or set {ROUTER_ENV}."
-                ) from exc
+                raise Unavailable(_no_router(endpoint, login)) from exc
             if not announced:
                 log.warning("waiting for the router at %s ...", endpoint)
                 announced = True
@@ -139,7 +163,7 @@ class ZenohBus(Bus):
                  stop: threading.Event | None = None) -> None:
         _steady_malloc()
         super().__init__(name, router_endpoint(endpoint))
-        self.session = open_client(self.endpoint, wait=wait, stop=stop)
+        self.session = open_client(self.endpoint, wait=wait, stop=stop, name=name)
 
     def _declare_publisher(self, key: str, express: bool, block: bool) -> _Publisher:
         cc = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
@@ -211,17 +235,19 @@ class ZenohBus(Bus):
         self.session.close()
 
 
-def run_router(endpoint: str | None = None, stop: threading.Event | None = None) -> None:
+def run_router(endpoint: str | None = None, stop: threading.Event | None = None,
+               credentials: Path | str | None = None) -> None:
     """Run a Zenoh router in this process until `stop` is set (or forever)."""
     ep = router_endpoint(endpoint)
-    session = zenoh.open(router_config(ep))
-    log.info("router listening on %s", ep)
+    session = zenoh.open(router_config(ep, credentials))
+    log.info("router listening on %s%s", ep, " with access control" if credentials else "")
     try:
         (stop or threading.Event()).wait()
     finally:
         session.close()
 
 
-def open_router(endpoint: str) -> zenoh.Session:
-    """Open (and return) an in-process router session, for tests and `asibot up`."""
-    return zenoh.open(router_config(endpoint))
+def open_router(endpoint: str, credentials: Path | str | None = None) -> zenoh.Session:
+    """Open (and return) an in-process router session, for tests and `asibot up`; with a
+    credentials folder (asibot.access), only its logins get in, each with its role's rights."""
+    return zenoh.open(router_config(endpoint, credentials))

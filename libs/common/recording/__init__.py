@@ -1,10 +1,15 @@
 """Recordings: the recorder service, the MCAP files it writes, and what reads them.
 
 - `recorder`: the service (`python -m asibot.recording --dir recordings`): every key on the
-  bus into `<dir>/<date>-<time>.mcap`, msgpack payloads, zstd chunks flushed every second.
+  bus into `<dir>/<date>-<time>.mcap`, msgpack payloads, zstd chunks flushed every second;
+  `Session` splits a long session into parts.
+- `thinning`: camera images recorded at a lower rate (`CameraThinner`).
+- `rotation`: the folder kept within a size and an age (`Retention`, `prune`).
 - `writer`: `LeanWriter`, the recorder's fast MCAP writer.
 - `reader`: `iter_messages`, `Reading`, `summarize`, `list_recordings`; reads a file whose
-  writer was killed up to its last complete chunk.
+  writer was killed up to its last complete chunk, and a live one as it was or following it.
+- `index`: a file's contents from its summary or its chunk and message indexes.
+- `live`: the writer's lock, and reading a file that is still being written.
 - `replay`: `replay.replay(path, put, speed=...)` republishes a recording.
 - `export`: `export_foxglove(path)` rewrites a recording as JSON with Foxglove's schemas.
 """
@@ -12,17 +17,19 @@
 from __future__ import annotations
 
 # `replay` stays the module: binding its function here would hide the module behind it.
-from asibot.recording import export, reader, recorder, replay, writer
+from asibot.recording import export, index, live, reader, recorder, replay, rotation, thinning, writer
 from asibot.recording.export import ExportSummary, export_foxglove
 from asibot.recording.reader import (NotARecording, Reading, Record, Summary, check_recording,
                                      iter_messages, list_recordings, summarize)
-from asibot.recording.recorder import McapRecorder, RecorderService
+from asibot.recording.recorder import McapRecorder, RecorderService, Session
+from asibot.recording.rotation import Retention, prune
+from asibot.recording.thinning import CameraThinner
 from asibot.recording.writer import LeanWriter
 
 __all__ = [
-    "export", "reader", "recorder", "replay", "writer",
+    "export", "index", "live", "reader", "recorder", "replay", "rotation", "thinning", "writer",
     "ExportSummary", "export_foxglove",
     "NotARecording", "Reading", "Record", "Summary", "check_recording", "iter_messages",
     "list_recordings", "summarize",
-    "McapRecorder", "RecorderService", "LeanWriter",
+    "McapRecorder", "RecorderService", "Session", "Retention", "prune", "CameraThinner", "LeanWriter",
 ]

@@ -27,6 +27,7 @@ import dataclasses
 import json
 import math
 import os
+import threading
 import typing
 from pathlib import Path
 from typing import Any, Callable
@@ -53,6 +54,8 @@ class ExportSummary:
     skipped: int = 0           # payloads that were not MessagePack, or not a valid message
     schemas: dict[str, str] = dataclasses.field(default_factory=dict)   # topic -> schema name
     complete: bool = True      # False when the source ended in a truncated chunk
+    live: bool = False         # the source was being written when the export began
+    stopped: bool = False      # a follow was ended by `stop` (Ctrl-C), not by the writer
 
 
 # ---------------------------------------------------------------- JSON schemas
@@ -308,11 +311,14 @@ def default_output(source: Path) -> Path:
     return source.parent / "foxglove" / source.name
 
 
-def export_foxglove(source: Path | str, output: Path | str | None = None) -> ExportSummary:
+def export_foxglove(source: Path | str, output: Path | str | None = None, *, follow: bool = False,
+                    stop: threading.Event | None = None) -> ExportSummary:
     """Write `output` (default: `default_output(source)`) and summarise it.
 
-    The output appears atomically: a crash leaves no half-written file under its name, and
-    the source recording is never touched.
+    A recording still being written is exported as it was when the export began; with
+    `follow`, the export goes on with what the recorder appends until it closes the file or
+    `stop` is set. The output appears atomically: a crash leaves no half-written file under
+    its name, and the source recording is never touched.
     """
     source = Path(source)
     check_recording(source)
@@ -328,7 +334,7 @@ def export_foxglove(source: Path | str, output: Path | str | None = None) -> Exp
             writer.start(profile="", library="asibot export")
             schema_ids: dict[str, int] = {}
             channel_ids: dict[str, int] = {}
-            records = Reading(source)
+            records = Reading(source, follow=follow, stop=stop)
             for rec in records:
                 try:
                     out = convert(rec.key, decode_any(rec.payload))
@@ -350,7 +356,7 @@ def export_foxglove(source: Path | str, output: Path | str | None = None) -> Exp
             writer.finish()
             f.flush()
             os.fsync(f.fileno())
-        summary.complete = records.complete
+        summary.complete, summary.live, summary.stopped = records.complete, records.live, records.stopped
         os.replace(tmp, output)
     finally:
         tmp.unlink(missing_ok=True)

@@ -19,6 +19,8 @@ from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, M
                           Opcode, RecordBuilder, Statistics, SummaryOffset)
 
 MAGIC = b"\x89MCAP0\r\n"
+TYPE_METADATA = "message_type"
+"""Channel metadata naming the message type on a channel, so a listing needs no message."""
 _MESSAGE = struct.Struct("<BQHIQQ")   # opcode, length, channel, sequence, log_time, publish_time
 _MESSAGE_FIXED = 2 + 4 + 8 + 8
 
@@ -44,6 +46,11 @@ class LeanWriter:
         self._index: dict[int, list[tuple[int, int]]] = defaultdict(list)
         self._chunk_start = 2**64 - 1
         self._chunk_end = 0
+
+    @property
+    def size(self) -> int:
+        """Bytes written so far, the open chunk not included."""
+        return self._pos
 
     def _write(self, data: bytes) -> None:
         self._out.write(data)

@@ -59,11 +59,22 @@ export function pointsPanel() {
     el('h2', {}, 'Points'),
     el('div', { class: 'row' }, capture, el('label', {}, 'Name ', name)),
     list);
+  // The name a capture would take follows the arm ("above-can" over the can, "fridge-1" at
+  // the fridge); the server names it, so the page asks while the panel is on screen.
+  const suggest = async () => {
+    if (!state.chosen || document.hidden) return;
+    try {
+      const s = await api.get(`/api/robots/${state.chosen}/suggested-point-name`);
+      name.placeholder = s.name;
+    } catch { /* the robot went away: keep the last suggestion */ }
+  };
+  const timer = setInterval(suggest, 1000);
   const off = onPointsChange((data) => {
     name.placeholder = data.suggested;
+    suggest();
     list.replaceChildren(...(data.points.length ? data.points.map(row)
       : [el('li', { class: 'muted' }, 'No points yet: move the arm and touch Capture point.')]));
   });
   loadPoints().catch((e) => notify(e.message));
-  return { panel, unmount: off };
+  return { panel, unmount: () => { off(); clearInterval(timer); } };
 }

@@ -1,7 +1,8 @@
 // Speech tab: the words and phrases that launch tasks, and the microphone: listen, say a
 // task's word, and see what the voice service heard and did (it only listens for the words
-// given to tasks, and for stop, yes and no).
-import { api, onMessage } from '../api.js';
+// given to tasks, and for stop, yes and no). "Record by saying it" teaches the voice service how
+// the user says a word: the next phrase said into the microphone becomes a pronunciation of it.
+import { api, onMessage, state } from '../api.js';
 import { listening, onListening, startListening, stopListening } from '../microphone.js';
 import { attempt, el, notify } from '../ui.js';
 
@@ -16,6 +17,47 @@ function describe(h) {
   }[h.action] || h.action;
   const text = `${said}: ${did}`;
   return /[.!?]$/.test(text) ? text : `${text}.`;
+}
+
+const LISTEN_S = 8;
+const MAX_SAYINGS = 3;   // the voice service keeps the three newest sayings of a word
+
+// What the voice service made of a saying, in the user's words.
+function describeLearned(r) {
+  const again = { true: 'Heard it again: matches. ', false: `Heard it again: ${r.heard ? `sounded like “${r.heard}”` : 'no match'}; kept this saying too. ` }[r.matched] || '';
+  return `${again}Learned: ${r.phones} (saying ${r.sayings.length} of ${MAX_SAYINGS}).`;
+}
+
+// One word of the list: its name, Record by saying it (Say it again), Forget how I say it, Delete;
+// each button's name begins with what it shows, then names the word.
+function wordRow(w, sayings, refresh) {
+  const heard = el('span', { class: 'muted', role: 'status', 'aria-live': 'polite' },
+    sayings.length ? `Learned: ${sayings[sayings.length - 1]} (${sayings.length} of ${MAX_SAYINGS} sayings).` : '');
+  const record = el('button', {
+    type: 'button', 'aria-label': `${sayings.length ? 'Say it again' : 'Record by saying it'}: ${w}`,
+    onclick: () => attempt(async () => {
+      record.disabled = true;
+      try {
+        if (!listening()) await startListening();
+        heard.textContent = `Listening: say “${w}” now.`;
+        const r = await api.post('/api/voice/learn', { word: w, page: state.page, seconds: LISTEN_S });
+        await refresh();
+        return r;
+      } catch (e) {
+        heard.textContent = e.message;
+        throw e;
+      } finally { record.disabled = false; }
+    }, (r) => `“${w}”: ${describeLearned(r)}`),
+  }, sayings.length ? 'Say it again' : 'Record by saying it');
+  const forget = sayings.length ? [el('button', {
+    type: 'button', 'aria-label': `Forget how I say it: ${w}`,
+    onclick: () => attempt(async () => { await api.post('/api/voice/forget', { text: w }); await refresh(); }, `How “${w}” is said is forgotten.`),
+  }, 'Forget how I say it')] : [];
+  const remove = el('button', {
+    type: 'button', class: 'danger', 'aria-label': `Delete ${w}`,
+    onclick: () => attempt(async () => { await api.del(`/api/words/${encodeURIComponent(w)}`); await refresh(); }, `"${w}" deleted.`),
+  }, 'Delete');
+  return el('li', {}, el('span', { class: 'pname' }, w), record, ...forget, remove, heard);
 }
 
 function micPanel() {
@@ -59,14 +101,15 @@ export default {
   mount(root) {
     const list = el('ul', { class: 'points', 'aria-label': 'Words and phrases' });
     const word = el('input', { type: 'text', 'aria-label': 'Word or phrase', placeholder: 'give me the red can', maxlength: '80' });
+    const learnNote = el('p', { class: 'muted' });
     const refresh = async () => {
       const { words } = await api.get('/api/words');
-      list.replaceChildren(...(words.length ? words.map((w) => el('li', {},
-        el('span', { class: 'pname' }, w),
-        el('button', {
-          type: 'button', class: 'danger', 'aria-label': `Delete ${w}`,
-          onclick: () => attempt(async () => { await api.del(`/api/words/${encodeURIComponent(w)}`); await refresh(); }, `"${w}" deleted.`),
-        }, 'Delete'))) : [el('li', { class: 'muted' }, 'No words yet.')]));
+      // without the voice service the words are still listed; only the learned sayings are missing
+      const learned = await api.get('/api/voice/learned').then((r) => { learnNote.textContent = ''; return r; })
+        .catch((e) => { learnNote.textContent = e.message; return { words: {}, phrases: {} }; });
+      const sayings = (w) => learned.words[learned.phrases[w]] || [];
+      list.replaceChildren(...(words.length ? words.map((w) => wordRow(w, sayings(w), refresh))
+        : [el('li', { class: 'muted' }, 'No words yet.')]));
     };
     const add = () => attempt(async () => {
       const r = await api.post('/api/words', { text: word.value.trim() });
@@ -80,8 +123,9 @@ export default {
       el('section', { class: 'panel', 'aria-label': 'Speech' },
         el('h2', {}, 'Words and phrases'),
         el('p', {}, 'Type the word or phrase a person will say to launch a task. Give it to a task on the Assigner page; then say it with the microphone on to check that it is heard.'),
+        el('p', {}, 'A name, a made-up word, or a word said in your own way: press “Record by saying it” and say it once or twice; the robot then listens for the way you say it.'),
         el('div', { class: 'row' }, word, el('button', { type: 'button', class: 'primary', onclick: add }, 'Record word')),
-        list),
+        list, learnNote),
       mic.panel));
     refresh().catch((e) => notify(e.message));
     return { unmount: mic.unmount };
