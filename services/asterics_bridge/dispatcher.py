@@ -431,7 +431,9 @@ class Dispatcher:
             return False
 
     def expire(self) -> None:
-        """Stop continuous motions older than `longest` s (call it a few times a second)."""
+        """Stop continuous motions older than `longest` s, and keep the status board
+        following the robots (call it a few times a second)."""
+        self.board.check()
         now = self.clock()
         with self._lock:
             due = {r: mo for r, mo in self._motions.items()
@@ -452,7 +454,8 @@ class Dispatcher:
                 self._send_stop(robot, motion, "stops_on_disconnect")
 
     def health(self) -> dict:
-        return {**self.counters, "clients": self.sessions(), "moving": sorted(self._motions)}
+        return {**self.counters, "clients": self.sessions(), "moving": sorted(self._motions),
+                "resubscribed": self.board.resubscribed}
 
 
 def parse_events(text: str) -> dict[int, str]:

@@ -421,6 +421,11 @@ class Drain:
                 return
             _guarded(self._handle, item)
 
+    @property
+    def running(self) -> bool:
+        """Whether a thread still pulls from the channel (diagnostics: it ends only on close)."""
+        return any(t.is_alive() for t in self._threads)
+
     def close(self) -> None:
         try:
             self._undeclare()
