@@ -19,7 +19,8 @@ through to `cart/rpc/movl`, while an allow list refuses it.
 
 The credentials live in one private folder (0700, files 0600), made on first use:
 `router.passwords` (the router's dictionary) and `<role>.credentials` (`user:password`)
-per role, so a machine that only runs the web page gets only `operator.credentials`.
+per role, so a machine that only runs the web page gets only `operator.credentials` (and
+`ca.pem`, to reach the router over `tls/` across a network: asibot.certificates).
 A process presents credentials when `ASIBOT_ACCESS` names that folder; its role is
 `ASIBOT_ROLE`, else the one of its bus name (`ROLE_OF`).
 """
@@ -32,7 +33,7 @@ import secrets
 from pathlib import Path
 from typing import Callable
 
-from asibot import keys
+from asibot import certificates, keys
 
 ACCESS_ENV = "ASIBOT_ACCESS"
 ROLE_ENV = "ASIBOT_ROLE"
@@ -151,10 +152,12 @@ def _write_private(path: Path, text: str) -> None:
 
 
 def ensure_credentials(folder: Path | str | None = None) -> Path:
-    """Make the credentials folder with a random password per role, once; return it.
+    """Make the credentials folder with a random password per role and the router's TLS
+    certificate from a CA of its own (asibot.certificates), once; return it.
 
     Existing files are kept (other machines already hold copies of them). The folder is
-    0700 and the files 0600: the router's dictionary holds every password.
+    0700 and the files 0600 (the router's dictionary holds every password), but `ca.pem`,
+    which every client gets.
     """
     folder = (Path(folder) if folder else default_folder()).absolute()   # children run elsewhere
     folder.mkdir(parents=True, exist_ok=True, mode=0o700)
@@ -166,6 +169,7 @@ def ensure_credentials(folder: Path | str | None = None) -> Path:
             _write_private(folder / f"{role}.credentials", f"{username(role)}:{password}\n")
         lines = [f"{username(r)}:{p}" for r, p in logins.items()] + [":".join(ANONYMOUS)]
         _write_private(dictionary, "\n".join(lines) + "\n")
+    certificates.ensure_router_certificate(folder)   # for tls/: logins cross a network encrypted
     return folder
 
 
@@ -213,6 +217,46 @@ def login(bus_name: str) -> Login | None:
         raise ValueError(f"{path} is not `user:password` on one line: copy it again from the "
                          "robot's credentials folder")
     return Login(user, password)
+
+
+def may(role: str, message: str, key: str) -> bool:
+    """Whether the router lets `role` send `message` ("put", "query", ...) on `key`: the same
+    allow lists it applies, tested the way Zenoh tests them (a rule's expression includes `key`)."""
+    import zenoh   # the bus's own dependency; only asked once access control is on
+
+    wanted = zenoh.KeyExpr(key)
+    return any(message in messages and any(zenoh.KeyExpr(e).includes(wanted) for e in exprs)
+               for messages, exprs in _GRANTS[role])
+
+
+def _a(role: str) -> str:
+    return f"an {role}" if role[0] in "aeiou" else f"a {role}"
+
+
+_DOING = {"put": "publishing", "query": "calling", "declare_queryable": "serving"}
+
+
+def refusal(bus_name: str, message: str, key: str) -> str | None:
+    """The sentence for what the router would refuse a session named `bus_name`, or None when
+    it allows it or runs without access control ($ASIBOT_ACCESS unset).
+
+    The router drops what it refuses without a word: a call would just find nobody, and a
+    publisher would publish into the void. Saying so, and who may, is the user's only clue.
+    """
+    found = login(bus_name)
+    if found is None:
+        return None
+    role = "reader" if found.user == ANONYMOUS[0] else role_of(bus_name)
+    if may(role, message, key):
+        return None
+    able = [r for r in ROLES if may(r, message, key)]
+    if able:
+        how = (f"only {' or '.join(_a(r) for r in able)} may: run it with {ROLE_ENV}={able[0]} and "
+               f"{default_folder() / (able[0] + '.credentials')} in place")
+    else:
+        how = "no role may (the keys of a replay under --prefix, or a misspelt key)"
+    return (f"The router's access control refuses {_DOING.get(message, message)} {key} to "
+            f"{found.user!r} ({role}, from {ACCESS_ENV}={default_folder()}); {how}.")
 
 
 def signed_in_as(bus_name: str) -> str:

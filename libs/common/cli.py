@@ -75,15 +75,23 @@ def cmd_up(args: argparse.Namespace) -> int:
     # `emulated` stay open on loopback unless asked (--access, or $ASIBOT_ACCESS set).
     secure = args.access if args.access is not None else (
         args.profile == "real" or bool(os.environ.get(access.ACCESS_ENV)))
+    if args.tls and not secure:
+        print("--tls lets other machines in: it needs access control (--access, or --profile real)",
+              file=sys.stderr)
+        return 2
     credentials = access.ensure_credentials() if secure else None
+    listen = f"{endpoint},tls/{args.tls}" if args.tls else None
     stop = _stop_on_signals()
-    sup = Supervisor(services, endpoint, root=path.resolve().parent, access=credentials)
+    sup = Supervisor(services, endpoint, root=path.resolve().parent, access=credentials, listen=listen)
     names = ", ".join(s.name for s in services)
     sup.say("asibot", f"profile {args.profile}: {names}")
     if credentials:
         sup.say("asibot", f"access control on: logins in {credentials} (`{access.ACCESS_ENV}={credentials} "
                           "asibot estop` from another shell); anonymous:anonymous may only read")
     recordings = path.resolve().parent / os.environ.get("ASIBOT_RECORDINGS", "recordings")  # as compose.yaml
+    if args.tls:
+        sup.say("asibot", f"other machines: ASIBOT_ROUTER=tls/<this machine>:{args.tls.rsplit(':', 1)[-1]}, "
+                          f"with {credentials}/ca.pem and their role's .credentials in their {access.ACCESS_ENV}")
     sup.say("asibot", f"router {endpoint}; recordings in {recordings}; Ctrl-C stops")
 
     def on_event(name: str, what: str) -> None:
@@ -148,11 +156,21 @@ def _driver_estop(bus: Bus, robot: str) -> bool | None:
         return None
 
 
+def _refused(bus: Bus, robots: list[str]) -> bool:
+    """Say so (True) when the router's access control would drop this session's estop."""
+    why = next(filter(None, (bus.refusal("put", keys.estop(r)) for r in robots)), None)
+    if why is not None:
+        print(why, file=sys.stderr)
+    return why is not None
+
+
 def cmd_estop(args: argparse.Namespace) -> int:
     with Bus("estop", wait=args.wait) as bus:
         robots = args.robots or sorted(keys.robot_of(k) or k for k in bus.alive(keys.ALL_DRIVERS))
         if not robots:
             print("No robot is live (no driver is running): there is nothing to stop.", file=sys.stderr)
+            return 1
+        if _refused(bus, robots):
             return 1
         reason = f"asibot estop by {_who()}"
         by = who("asibot estop", login_of="estop")
@@ -175,6 +193,8 @@ def cmd_release(args: argparse.Namespace) -> int:
     # session without the operator's is never delivered, so it is never logged either.
     by = who("asibot release", login_of="release")
     with Bus("release", wait=args.wait) as bus:
+        if _refused(bus, [args.robot]):
+            return 1
         bus.latch(keys.estop(args.robot), messages.EStop(engaged=False, reason="asibot release", by=by))
         if _wait_for(lambda: _driver_estop(bus, args.robot) is False, 2.0):
             print(f"{args.robot}: emergency stop released by {by}; it moves again only on a new motion request")
@@ -272,10 +292,24 @@ def cmd_replay(args: argparse.Namespace) -> int:
         if args.into_live and live:
             print(f"warning: replaying INTO the live robots {', '.join(live)}: their recorded commands "
                   "will move them. Ctrl-C stops the replay; `asibot estop` stops the robots.", file=sys.stderr)
-        put = bus.put_raw if args.prefix is None else (lambda k, p: bus.put_raw(f"{args.prefix}/{k}", p))
+        refused: list[str] = []
+
+        def put(key: str, payload: bytes) -> None:
+            key = key if args.prefix is None else f"{args.prefix}/{key}"
+            why = bus.refusal("put", key)
+            if why is not None:   # the router would drop it silently: stop and say so
+                refused.append(why)
+                stop.set()
+                return
+            bus.put_raw(key, payload)
+
         n = replay(args.file, put, speed=speed, only=args.only,
                    exclude=list(DEFAULT_EXCLUDE) + args.exclude, stop=stop,
                    allows=None if (args.into_live or args.prefix is not None) else guard.allows)
+        if refused:
+            print(f"Not replaying: {refused[0]} Replay into a stack started without access control "
+                  "(`asibot up`, or `asibot up --no-access`).", file=sys.stderr)
+            return 2
     print(f"replayed {n} messages from {args.file}")
     if guard.held:
         print(f"held back {guard.held} commands because a driver came alive during the replay "
@@ -313,6 +347,13 @@ def cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _host_port(text: str) -> str:
+    host, sep, port = text.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise argparse.ArgumentTypeError(f"give HOST:PORT such as 0.0.0.0:7448, not {text!r}")
+    return text
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="asibot", description="assistive robot stack")
     sub = p.add_subparsers(dest="command", required=True)
@@ -324,6 +365,9 @@ def build_parser() -> argparse.ArgumentParser:
     up.add_argument("--access", action=argparse.BooleanOptionalAction, default=None,
                     help="router with logins and access control (default: on for --profile real "
                          f"or when ${access.ACCESS_ENV} is set)")
+    up.add_argument("--tls", metavar="HOST:PORT", type=_host_port,
+                    help="also let other machines in, encrypted, on this address (e.g. 0.0.0.0:7448); "
+                         "needs access control")
     up.set_defaults(func=cmd_up)
 
     st = sub.add_parser("status", help="list the running services")

@@ -11,6 +11,7 @@ CODES = (
     "timeout",       # no answer in time
     "unavailable",   # nobody serves this (service down, driver absent)
     "fault",         # the hardware reports a fault; reset it first
+    "not_allowed",   # the router's access control refuses this login; use another role's
     "internal",      # a bug: the server caught an unexpected exception
 )
 
@@ -84,6 +85,10 @@ class Timeout(RpcError):
 
 class Unavailable(RpcError):
     code = "unavailable"
+
+
+class NotAllowed(RpcError):
+    code = "not_allowed"
 
 
 class MessageError(AsibotError, ValueError):

@@ -40,14 +40,16 @@ def local_command(command: list[str]) -> list[str]:
     return list(command)
 
 
-def local_environment(spec: ServiceSpec, endpoint: str, access: Path | None = None) -> dict[str, str]:
+def local_environment(spec: ServiceSpec, endpoint: str, access: Path | None = None,
+                      listen: str | None = None) -> dict[str, str]:
     """The child's environment. With `access` (a credentials folder, asibot.access) the
-    router requires logins and each service logs in with the role of its own name."""
+    router requires logins and each service logs in with the role of its own name; `listen`
+    is where the router listens when that is more than `endpoint` (a tls/ one besides)."""
     env = dict(os.environ)
     env.update(spec.environment)
     # In containers the router is `tcp/router:7447`; here it is the loopback endpoint.
     env["ASIBOT_ROUTER"] = endpoint
-    env["ASIBOT_ROUTER_LISTEN"] = endpoint
+    env["ASIBOT_ROUTER_LISTEN"] = listen or endpoint
     env["ASIBOT_WEB_HOST"] = "127.0.0.1"   # a container listens on all its interfaces; here loopback only
     env["PYTHONUNBUFFERED"] = "1"
     # A role set in the launcher's shell would give every service the same one.
@@ -98,9 +100,9 @@ class Supervisor:
 
     def __init__(self, services: list[ServiceSpec], endpoint: str, *, root: Path | None = None,
                  out: IO[str] | None = None, color: bool | None = None,
-                 access: Path | None = None) -> None:
+                 access: Path | None = None, listen: str | None = None) -> None:
         self.endpoint = endpoint
-        self.access = access
+        self.access, self.listen = access, listen
         self.root = root or Path.cwd()
         self.out = out or sys.stdout
         self.color = self.out.isatty() if color is None else color
@@ -132,7 +134,7 @@ class Supervisor:
     def start(self, child: Child) -> None:
         cmd = local_command(child.spec.command)
         child.proc = subprocess.Popen(
-            cmd, cwd=self.root, env=local_environment(child.spec, self.endpoint, self.access),
+            cmd, cwd=self.root, env=local_environment(child.spec, self.endpoint, self.access, self.listen),
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
             start_new_session=True,  # our Ctrl-C must not hit children before we decide
             preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None,

@@ -107,6 +107,7 @@ class Pilot:
         self._scan_used = True           # the newest scan went into the filter already
         self._scan_odom: Pose | None = None   # the odometry pose where the newest scan was taken
         self._driving = False            # a primitive ran at the last tick
+        self._halt = False               # a primitive was stopped: send the base one zero
         self._told: int | None = None    # the goal whose end was told
         #: The latest thing that drove the base, "goal" or "drive", and how the latest drive
         #: ended (a goal's end is the navigator's): what `status_message` reports.
@@ -371,6 +372,10 @@ class Pilot:
             self._tell_goal_end()
 
     def _end_everything(self, now: float, why: str) -> None:
+        # A stopped primitive says "stop" to the base at the next cycle (the navigator does so
+        # for goals): silence alone stops the base only at its watchdog, later, and with a
+        # warning the user did not cause.
+        self._halt = self._halt or self.primitives.active or self._driving
         self._end_goal(now, why)
         if self.primitives.active:
             self.primitives.stop(f"stopped: {why}" if why else "stopped")
@@ -403,6 +408,10 @@ class Pilot:
                 self.amcl.update(self._scan_odom, scan)
         if self.estopped:
             return None
+        if self._halt and not self.primitives.active and self.navigator.status.state != ACTIVE:
+            self._halt = False
+            return Command(0.0, 0.0)
+        self._halt = False
         if self.primitives.active or self._driving:
             motion = self.primitives.step(now, odom.pose, scan)
             if motion.active:

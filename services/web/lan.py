@@ -13,13 +13,13 @@ from __future__ import annotations
 
 import datetime
 import hmac
-import ipaddress
 import os
 import secrets
 import socket
 from pathlib import Path
 from typing import Any
 
+from asibot.certificates import alt_names
 from asibot.web.userdata import write_atomic
 
 COOKIE = "asibot_token"
@@ -52,18 +52,12 @@ def ensure_certificate(folder: Path, names: list[str]) -> tuple[Path, Path]:
     folder.mkdir(parents=True, exist_ok=True)
     private = ec.generate_private_key(ec.SECP256R1())
     subject = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "ASIBOT Task Creator")])
-    alt: list[Any] = [x509.DNSName("localhost"), x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]
-    for name in names:
-        try:
-            alt.append(x509.IPAddress(ipaddress.ip_address(name)))
-        except ValueError:
-            alt.append(x509.DNSName(name))
     now = datetime.datetime.now(datetime.timezone.utc)
     certificate = (x509.CertificateBuilder().subject_name(subject).issuer_name(subject)
                    .public_key(private.public_key()).serial_number(x509.random_serial_number())
                    .not_valid_before(now - datetime.timedelta(minutes=5))
                    .not_valid_after(now + datetime.timedelta(days=825))
-                   .add_extension(x509.SubjectAlternativeName(alt), critical=False)
+                   .add_extension(alt_names(names), critical=False)
                    .sign(private, hashes.SHA256()))
     write_atomic(key, private.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
                                             serialization.NoEncryption()))

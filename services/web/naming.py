@@ -5,8 +5,9 @@ more than "point-7"). So a capture proposes, in this order:
 1. `<place>-N` when the robot's base stands at one of nav's named places (the Pioneer at the
    fridge: "fridge-1");
 2. `<point>-2` when the tool is where a taught point is, `above-<point>` when it is straight
-   above one (an approach point), or
-   `near-<point>` when it is close to one (the nearest of those the user named, if several);
+   above one (an approach point), `<thing>` straight below `above-<thing>` (down from the
+   approach point is at the thing), or `near-<point>` when it is close to one (the nearest of
+   those the user named, if several), with the user's separator (`above_can` gives `near_can`);
 3. `point-N`, the first free number, as the seed did.
 A suggestion is never a name already taken; the user can always type another.
 """
@@ -25,7 +26,8 @@ NEAR_M = 0.15
 ABOVE_MIN_M, ABOVE_SIDEWAYS_M = 0.02, 0.03
 
 _UNSAFE = re.compile(r"[^A-Za-z0-9_.-]+")
-_RELATION = re.compile(r"^(above|near)-")
+#: A relation the user wrote, with the separator they chose ("above-can", "above_can").
+_RELATION = re.compile(r"^(above|near)([-_])(.+)$")
 _GENERIC = re.compile(r"point-\d+")
 
 
@@ -71,7 +73,12 @@ def suggest(taken: Iterable[str], points: Iterable[tuple[str, Sequence[float]]] 
                 return _free(name, taken, numbered=False)
             values = dict(points)[name]
             sideways = math.dist(here[:2], values[:2])
-            rel = "above" if here[2] - values[2] >= ABOVE_MIN_M and sideways <= ABOVE_SIDEWAYS_M else "near"
-            # Near "above-can" is still about the can: no "above-above-can".
-            return _free(f"{rel}-{_RELATION.sub('', name)}", taken, numbered=False)
+            rise = here[2] - values[2]
+            written = _RELATION.match(name)
+            relation, sep, thing = written.groups() if written else ("", "-", name)
+            if relation == "above" and rise <= -ABOVE_MIN_M and sideways <= ABOVE_SIDEWAYS_M:
+                return _free(thing, taken, numbered=False)   # down from "above_can": at the can
+            rel = "above" if rise >= ABOVE_MIN_M and sideways <= ABOVE_SIDEWAYS_M else "near"
+            # Near "above-can" is still about the can: no "above-above-can"; "_" stays "_".
+            return _free(f"{rel}{sep}{thing}", taken, numbered=False)
     return _free("point", taken, numbered=True)

@@ -28,6 +28,13 @@ NAVIGATE_FIELDS = {"id", "modelName", "modelVersion", "navType", "toGridId", "ad
                    "searchCollectedText", "searchText"}
 ELEMENT_TYPES = {"ELEMENT_TYPE_NORMAL", "ELEMENT_TYPE_COLLECT", "ELEMENT_TYPE_PREDICTION", "ELEMENT_TYPE_LIVE"}
 MODEL_VERSION = {"major": 6, "minor": 0, "patch": 0}
+#: The CellBoard plugin's properties (its bundle_descriptor.xml in asterics/AsTeRICS, c846951a;
+#: the 2013 ARE 2.2 lacks the nine from scanCycles on).
+CELLBOARD_PROPERTIES = {
+    "caption", "rows", "columns", "textColor", "backgroundColor", "scanColor", "scanMode", "hoverTime",
+    "scanCycles", "hoverIndicator", "hoverFrameThickness", "enableEdit", "enableClickSelection",
+    "commandSeparator", "keyboardFile", "ignoreKeyboardFileProperties", "displayGUI",
+} | {f"{kind}{i}" for kind in ("cellText", "actionText", "cellImage") for i in range(1, 37)}
 
 
 @pytest.fixture(scope="module")
@@ -114,8 +121,13 @@ def test_the_are_model_wires_a_scanning_keyboard_to_netconnection():
     assert props == {"connectionType": "1", "IP": "127.0.0.1", "port": str(DEFAULT_TCP_PORT),
                      "multisession": "false"}
     board = {p.get("name"): p.get("value") for p in comps["CellBoard.1"].iter("property")}
-    actions = [v for k, v in board.items() if k.startswith("actionText")]
-    assert len(actions) == int(board["rows"]) * int(board["columns"])
+    # Every property of the plugin, as the ACS saves a model: the ARE 2.2 fails on a missing one
+    assert set(board) == CELLBOARD_PROPERTIES, set(board) ^ CELLBOARD_PROPERTIES
+    actions = [v for k, v in board.items() if k.startswith("actionText") and v]
+    # rows, columns and scanMode are indexes into the ACS's combo boxes: rows "2" is 3 rows
+    # (CellBoardInstance.getRowCount() is propRows + 1; seen as a 4 x 4 board in a real ARE)
+    assert (int(board["rows"]) + 1, int(board["columns"]) + 1) == (3, 3) == (len(actions) // 3, 3)
+    assert board["scanMode"] == "1"    # row-column: "none//row-column//column-row//directed//hover"
     for action in actions:
         vocab.parse(action)
     (channel,) = root.iter("channel")
@@ -123,6 +135,23 @@ def test_the_are_model_wires_a_scanning_keyboard_to_netconnection():
         ("CellBoard.1", "selectedCellText"), ("NetConnection.1", "stringInputPort1")]
     for ec in root.iter("eventChannel"):
         assert len(ec.find("targets").findall("target")) == 1   # the ARE refuses two targets
+    # One switch: a Timer scans on every second (an endless loop, started with the model)
+    timer = {p.get("name"): p.get("value") for p in comps["Timer.1"].iter("property")}
+    assert comps["Timer.1"].get("type_id") == "asterics.Timer"
+    assert timer == {"mode": "2", "repeatCounter": "1", "timePeriod": "1000", "resolution": "50",
+                     "waitPeriod": "0", "autostart": "true"}
+    (scan,) = root.iter("eventChannel")
+    assert [(e.find("component").get("id"), e.find("eventPort").get("id")) for e in scan.iter()
+            if e.tag in ("source", "target")] == [("Timer.1", "periodFinished"), ("CellBoard.1", "scanMove")]
+    # A GUI plugin without <gui> gets no screen area in the ARE: the keyboard would be invisible.
+    gui = comps["CellBoard.1"].find("gui")
+    area = {e.tag: int(e.text) for e in gui}
+    assert list(area) == ["posX", "posY", "width", "height"] and area["width"] > 0 and area["height"] > 0
+    window = root.find("modelGUI")
+    assert [e.tag for e in window] == ["Decoration", "Fullscreen", "AlwaysOnTop", "ToSystemTray",
+                                       "ShopControlPanel", "AREGUIWindow"]   # the schema's order
+    assert list(root)[-1] is window and [c.tag for c in comps["CellBoard.1"]] == [
+        "description", "properties", "layout", "gui"]
 
 
 def test_the_docs_table_lists_every_word():

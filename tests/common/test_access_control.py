@@ -22,7 +22,7 @@ import pytest
 
 from asibot import access, keys, messages
 from asibot.bus import Bus, open_router
-from asibot.errors import AsibotError, Unavailable
+from asibot.errors import AsibotError, NotAllowed, Unavailable
 from asibot.messages import ArmCommand, ArmState, EStop, Twist
 from asibot.testing import free_port, wait_until
 
@@ -69,9 +69,10 @@ def test_credentials_are_private_and_made_once(tmp_path):
     folder = access.ensure_credentials(tmp_path / "access")
     assert stat.S_IMODE(folder.stat().st_mode) == 0o700
     files = sorted(p.name for p in folder.iterdir())
-    assert files == ["controller.credentials", "driver.credentials", "operator.credentials",
-                     access.DICTIONARY]
-    assert all(stat.S_IMODE(p.stat().st_mode) == 0o600 for p in folder.iterdir())
+    assert files == ["ca.key", "ca.pem", "controller.credentials", "driver.credentials",
+                     "operator.credentials", "router.key", access.DICTIONARY, "router.pem"]
+    # Every file is private but the CA's certificate, which every client gets (test_router_tls).
+    assert all(stat.S_IMODE(p.stat().st_mode) == 0o600 for p in folder.iterdir() if p.name != "ca.pem")
     before = {p.name: p.read_text() for p in folder.iterdir()}
     access.ensure_credentials(folder)
     assert {p.name: p.read_text() for p in folder.iterdir()} == before
@@ -141,7 +142,8 @@ def test_the_anonymous_reader_reads_state_and_moves_nothing(secured):
         anonymous.put_raw(keys.base_cmd_vel(ROBOT), messages.encode(Twist(vx=9.0, wz=0.0)))
         anonymous.latch(keys.estop(ROBOT), EStop(engaged=False, reason="anonymous release"))
         anonymous.announce(keys.controller_alive(ROBOT, "anonymous"))
-        with pytest.raises(AsibotError):
+        with pytest.raises(NotAllowed, match=r"refuses calling rb/acl-bot/cart/rpc/stop to 'anonymous' "
+                                             r"\(reader, .*only an operator may"):
             anonymous.call(keys.cart_rpc(ROBOT, "stop"), timeout=1.0)
 
         # The permitted ones, after them, on the same ways.
@@ -224,13 +226,45 @@ def test_only_an_operator_releases_the_estop_and_the_release_says_who(secured):
         wait_until(lambda: held and held[-1].engaged, timeout=10.0, message="the estop never arrived")
 
         refused = _cli("release", ROBOT, env=dict(env, ASIBOT_ROLE="reader"))
-        assert refused.returncode == 1 and "no driver of acl-bot confirmed it" in refused.stderr
+        assert refused.returncode == 1
+        assert "refuses publishing rb/acl-bot/estop to 'anonymous' (reader" in refused.stderr
         released = _cli("release", ROBOT, env=env)
         assert released.returncode == 0, released.stderr
         assert not held[-1].engaged and held[-1].by.endswith(" as operator")
         assert f"released by {held[-1].by}" in released.stdout
         # The anonymous release, sent first, never reached the driver.
         assert [m.engaged for m in held] == [True, False]
+
+
+def test_a_refusal_is_said_where_the_router_would_drop_it_silently(secured, caplog):
+    """A refused call fails at once with who may, not "nobody answers"; a refused publisher
+    says so once in the log; each role's own keys are never called refused."""
+    endpoint, _ = secured
+    with _open("recorder", endpoint) as reader, _open("nav", endpoint) as controller:
+        with pytest.raises(NotAllowed, match="only an operator may: run it with ASIBOT_ROLE=operator"):
+            reader.call(keys.nav_rpc(ROBOT, "goto_place"), {"place": "fridge"}, timeout=5.0)
+        with caplog.at_level("WARNING", logger="asibot.bus"):
+            for _ in range(3):
+                controller.put_raw(keys.base_odom(ROBOT), b"\x80")
+        said = [r.getMessage() for r in caplog.records if "refuses publishing" in r.getMessage()]
+        assert said == [f"The router's access control refuses publishing {keys.base_odom(ROBOT)} to "
+                        f"'controller' (controller, from ASIBOT_ACCESS={access.default_folder()}); only a "
+                        f"driver may: run it with ASIBOT_ROLE=driver and "
+                        f"{access.default_folder() / 'driver.credentials'} in place."]
+        assert controller.refusal("put", keys.base_cmd_vel(ROBOT)) is None
+        assert controller.refusal("query", keys.driver_rpc(ROBOT, "status")) is None
+
+
+def test_replay_under_access_control_refuses_with_a_sentence(secured):
+    """`asibot replay` logs in as a reader: the router would drop all it publishes."""
+    endpoint, folder = secured
+    env = dict(os.environ, ASIBOT_ROUTER=endpoint, ASIBOT_ACCESS=str(folder))
+    env.pop(access.ROLE_ENV, None)
+    fixture = Path(__file__).resolve().parents[2] / "recordings" / "fixtures" / "nav_drive.mcap"
+    done = _cli("replay", str(fixture), "--fast", env=env)
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert "Not replaying: The router's access control refuses publishing rb/" in done.stderr
+    assert "to 'anonymous' (reader" in done.stderr and "asibot up --no-access" in done.stderr
 
 
 @pytest.mark.slow
@@ -242,7 +276,9 @@ def test_asibot_up_with_access_makes_the_logins_and_admits_only_them(tmp_path):
     env = dict(os.environ, ASIBOT_ROUTER=f"tcp/127.0.0.1:{free_port()}", ASIBOT_ACCESS=str(folder),
                ASIBOT_RECORDINGS=str(tmp_path / "recordings"))
     env.pop(access.ROLE_ENV, None)
-    up = subprocess.Popen([sys.executable, "-m", "asibot.cli", "up", "--access", "--only", "recorder"],
+    tls = free_port()
+    up = subprocess.Popen([sys.executable, "-m", "asibot.cli", "up", "--access", "--only", "recorder",
+                           "--tls", f"127.0.0.1:{tls}"],
                           cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     lines: list[str] = []
     threading.Thread(target=lambda: lines.extend(up.stdout), daemon=True).start()
@@ -254,7 +290,13 @@ def test_asibot_up_with_access_makes_the_logins_and_admits_only_them(tmp_path):
         assert stat.S_IMODE(folder.stat().st_mode) == 0o700
         anonymous = _cli("status", "--wait", "1", env={k: v for k, v in env.items() if k != access.ACCESS_ENV})
         assert anonymous.returncode == 1 and "set ASIBOT_ACCESS to its credentials folder" in anonymous.stderr
+        # Another machine comes in over TLS with the folder's ca.pem (test_router_tls).
+        remote = _cli("status", env=dict(env, ASIBOT_ROUTER=f"tls/127.0.0.1:{tls}"))
+        assert remote.returncode == 0 and "recorder" in remote.stdout, remote.stderr
     finally:
         up.send_signal(signal.SIGINT)
         assert up.wait(15) == 0
     assert f"access control on: logins in {folder}" in "".join(lines)
+    assert f"other machines: ASIBOT_ROUTER=tls/<this machine>:{tls}" in "".join(lines)
+    open_router_for_all = _cli("up", "--no-access", "--tls", "0.0.0.0:7448", env=env)
+    assert open_router_for_all.returncode == 2 and "it needs access control" in open_router_for_all.stderr

@@ -550,7 +550,7 @@ def frames(page, n: int = 3) -> None:
 def test_the_3d_view_can_be_paused(page, kitchen, arm):
     go(page, "joint")
     page.wait_for_function("document.querySelector('.viewer canvas').width > 0")
-    wait_until(lambda: arm.joints() and not arm.moving(), timeout=30)
+    wait_until(lambda: arm.joints() and arm.still(), timeout=30)
     pause = page.locator(".viewer-bar").get_by_role("button", name="Pause")
     pause.click()
     assert pause.get_attribute("aria-pressed") == "true"

@@ -24,6 +24,10 @@ ROBOT = "asibot-sim"
 ABOVE, AT, LIFTED = [0.0, 0.5, 0.21, 180, 0], [0.0, 0.5, 0.09, 180, 0], [0.0, 0.5, 0.19, 180, 0]
 
 
+#: Samples of arm/state (100 Hz) the joints must hold still over to count as stopped (0.3 s).
+STILL_SAMPLES = 30
+
+
 class ArmWatch:
     """The simulated arm's joints as the driver publishes them, with their arrival times."""
 
@@ -42,15 +46,25 @@ class ArmWatch:
         with self._lock:
             return self.samples[-1][1]
 
-    def moving(self, since: float = 0.0, eps: float = 1e-4) -> bool:
-        """Whether the joints changed over the last 100 ms (of samples after `since`)."""
+    # Judged by samples, not by the clock: arm/state comes at 100 Hz of the driver's time, and
+    # on a loaded machine it arrives in bunches, so "no sample in the last 100 ms" means nothing.
+    def _newest(self, since: float, n: int) -> list[list[float]]:
         with self._lock:
-            recent = [q for t, q in self.samples if t > max(since, time.monotonic() - 0.1)]
+            return [q for t, q in self.samples if t > since][-n:]
+
+    def moving(self, since: float = 0.0, eps: float = 1e-4) -> bool:
+        """Whether the joints changed over the newest 10 samples (0.1 s) after `since`."""
+        recent = self._newest(since, 10)
         return len(recent) >= 2 and max(abs(a - b) for a, b in zip(recent[0], recent[-1])) > eps
+
+    def still(self, since: float = 0.0, eps: float = 1e-4, samples: int = STILL_SAMPLES) -> bool:
+        """Whether every joint held within `eps` over the newest `samples` samples after `since`."""
+        recent = self._newest(since, samples)
+        return len(recent) == samples and all(max(j) - min(j) <= eps for j in zip(*recent))
 
     def stopped_at(self, after: float, eps: float = 1e-4, timeout: float = 5.0) -> float:
         """The time after `after` at which the joints last changed (wait until they hold still)."""
-        wait_until(lambda: not self.moving(eps=eps) and time.monotonic() > after + 0.3, timeout=timeout)
+        wait_until(lambda: self.still(after, eps) and time.monotonic() > after + 0.3, timeout=timeout)
         with self._lock:
             samples = [(t, q) for t, q in self.samples if t >= after]
         last = after
@@ -84,6 +98,12 @@ def move_with_form(page, point, kind: str, arm: ArmWatch) -> None:
     page.get_by_role("button", name="Move", exact=True).click()
     wait_until(lambda: arm.moving(since=start), timeout=10)
     arm.stopped_at(start, timeout=60)
+    # A capture takes the web's newest tool position: as a user reads the numbers before
+    # pressing Capture, wait until the web has the arm where it stopped (it lags on a busy machine).
+    origin = page.url.split("#")[0].rstrip("/")
+    arrived = lambda: (p := page.request.get(f"{origin}/api/robots/{ROBOT}").json().get("point")) and \
+        max(abs(a - b) for a, b in zip(p[:3], point[:3])) < 0.003   # noqa: E731
+    wait_until(arrived, timeout=20, interval=0.1, message=f"the web never saw the arm at {point}")
 
 
 def capture(page, name: str) -> None:

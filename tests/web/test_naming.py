@@ -41,3 +41,15 @@ def test_a_base_at_a_named_place_names_the_point_after_it():
     assert suggest(["fridge-1"], place="fridge") == "fridge-2"
     assert suggest([], place="charging station") == "charging-station-1"
     assert suggest([], place="1st shelf") == "p-1st-shelf-1"
+
+
+def test_down_from_an_approach_point_is_the_thing_itself_in_the_users_spelling():
+    """Seen by hand: `at_can`, 12 cm below `above_can`, was offered `near-above_can`."""
+    above = ("above_can", [0.0, 0.5, 0.21, 180, 0])
+    assert suggest(["above_can"], [above], here=[0.0, 0.5, 0.09, 180, 0]) == "can"
+    assert suggest(["above_can", "can"], [above], here=[0.0, 0.5, 0.09, 180, 0]) == "can-2"
+    assert suggest(["above_can"], [above], here=[0.08, 0.5, 0.2, 180, 0]) == "near_can"
+    assert suggest(["above-can"], [("above-can", above[1])], here=[0.0, 0.5, 0.1, 180, 0]) == "can"
+    # A name without a relation keeps "near-" with a hyphen, whatever is in it.
+    shelf = ("top_shelf", [0.0, 0.5, 0.21, 180, 0])
+    assert suggest(["top_shelf"], [shelf], here=[0.0, 0.5, 0.1, 180, 0]) == "near-top_shelf"

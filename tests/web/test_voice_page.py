@@ -163,8 +163,13 @@ def test_a_made_up_word_is_recorded_by_saying_it_on_the_page_and_then_launches_i
         row.get_by_text("Learned: ").wait_for(timeout=30000)
         assert "zorblat" in status()["words"]
         # the microphone keeps saying it: now it is heard, and launches the task
-        wait_until(lambda: any(h.action == "launch" and h.task == "Zorblat" for h in heard.all()), 60, interval=0.2,
-                   message="the learned word never launched its task")
+        learned_at = len(heard.all())
+        try:
+            wait_until(lambda: any(h.action == "launch" and h.task == "Zorblat" for h in heard.all()), 60,
+                       interval=0.2)
+        except AssertionError:   # say what was learned and heard: a garbled saying or a late one
+            raise AssertionError(f"the learned word never launched its task; the row says {row.inner_text()!r}; "
+                                 f"heard since: {[(h.action, h.text, h.reason) for h in heard.all()[learned_at:]]}")
         row.get_by_role("button", name="Say it again: zorblat").click()
         page.get_by_text("Heard it again: matches.", exact=False).wait_for(timeout=30000)
         row.get_by_text("(2 of 3 sayings)", exact=False).wait_for(timeout=10000)

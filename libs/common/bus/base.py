@@ -18,7 +18,7 @@ import weakref
 from typing import Any, Callable, Generic, Protocol, TypeVar
 
 from asibot import keys, messages
-from asibot.errors import CODES, MessageError, RpcError, Timeout, Unavailable
+from asibot.errors import CODES, MessageError, NotAllowed, RpcError, Timeout, Unavailable
 
 log = logging.getLogger("asibot.bus")
 
@@ -115,6 +115,7 @@ class Bus(abc.ABC):
         self._lock = threading.Lock()
         self._latched: dict[str, bytes] = {}
         self._closed = False
+        self._warned: set[str] = set()
         _open_buses.add(self)
 
     # ------------------------------------------------------------ what a backend provides
@@ -161,6 +162,11 @@ class Bus(abc.ABC):
     def _close_transport(self) -> None:
         """Close the connection itself, after every declaration was closed."""
 
+    def refusal(self, message: str, key: str) -> str | None:
+        """Why the router would refuse this session `message` on `key`; None when it may.
+        Only a router with access control refuses anything (see ZenohBus)."""
+        return None
+
     # ------------------------------------------------------------ bookkeeping
     def _keep(self, obj: Any) -> Any:
         with self._lock:
@@ -190,6 +196,7 @@ class Bus(abc.ABC):
     def publisher(self, key: str, msg_type: type[M], *, express: bool = False,
                   block: bool = False) -> Publisher[M]:
         """`express` skips batching (commands); `block` never drops (recordings, benchmarks)."""
+        self._warn_if_refused(key)
         return self._keep(Publisher(self._declare_publisher(key, express, block), key, msg_type))
 
     def subscribe(self, key: str, msg_type: type[M], callback: Callable[..., None], *,
@@ -226,7 +233,15 @@ class Bus(abc.ABC):
             key, lambda k, p: callback(k, p, time.time_ns()), maxsize, ring))
 
     def put_raw(self, key: str, payload: bytes) -> None:
+        self._warn_if_refused(key)
         self._put(key, payload)
+
+    def _warn_if_refused(self, key: str) -> None:
+        # The router drops refused samples without a word: say it once per key, not per sample.
+        why = self.refusal("put", key)
+        if why is not None and key not in self._warned:
+            self._warned.add(key)
+            log.warning("%s", why)
 
     def latch(self, key: str, msg: Any, *, publish: bool = True) -> None:
         """Publish `msg` and keep answering `subscribe(..., latest=True)` with it.
@@ -309,6 +324,9 @@ class Bus(abc.ABC):
         """
         if timeout <= 0:
             raise ValueError("timeout must be positive: a caller always bounds its wait")
+        why = self.refusal("query", key)
+        if why is not None:
+            raise NotAllowed(why)   # the router would drop it: "nobody answers" would mislead
         start = time.monotonic()
         answers = self._get(key, messages.pack(request or {}), timeout)
         good = [a[1] for a in answers if a is not None]
@@ -404,6 +422,8 @@ class Drain:
         self._handle = handle
         self._undeclare = undeclare
         self._prelude = prelude
+        self._name = name
+        self._closing = False
         self._threads = []
         for i in range(workers):
             t = threading.Thread(target=self._run, args=(i == 0,), name=name, daemon=True)
@@ -417,7 +437,10 @@ class Drain:
         while True:
             try:
                 item = self._recv()
-            except Exception:  # undeclared or session closed: the channel is finished
+            except Exception as exc:  # undeclared or session closed: the channel is finished
+                if not self._closing:   # nobody closed it: from now on nothing arrives, say so
+                    log.warning("%s: its channel ended before close() (%s: %s); nothing more will "
+                                "arrive on it", self._name, type(exc).__name__, exc)
                 return
             _guarded(self._handle, item)
 
@@ -427,6 +450,7 @@ class Drain:
         return any(t.is_alive() for t in self._threads)
 
     def close(self) -> None:
+        self._closing = True
         try:
             self._undeclare()
         except Exception:

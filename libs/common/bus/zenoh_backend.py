@@ -21,7 +21,7 @@ from typing import Any, Callable
 
 import zenoh
 
-from asibot import access
+from asibot import access, certificates
 from asibot.bus.base import Answer, Bus, Drain, Prelude
 from asibot.errors import Unavailable
 
@@ -29,6 +29,7 @@ log = logging.getLogger("asibot.bus")
 
 ROUTER_ENV = "ASIBOT_ROUTER"
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
+TLS = "tls/"
 
 def router_endpoint(explicit: str | None = None) -> str:
     """The router endpoint: an explicit value, else $ASIBOT_ROUTER, else the loopback default."""
@@ -54,19 +55,55 @@ def client_config(endpoint: str, connect_timeout_ms: int = 1000,
     if login is not None:
         cfg.insert_json5("transport/auth/usrpwd",
                          json.dumps({"user": login.user, "password": login.password}))
+    if endpoint.startswith(TLS):
+        # Only the robot's own CA is trusted, and the router must hold the name dialled.
+        cfg.insert_json5("transport/link/tls/root_ca_certificate", json.dumps(str(trusted_ca())))
+        cfg.insert_json5("transport/link/tls/verify_name_on_connect", "true")
     return cfg
+
+
+def trusted_ca() -> Path:
+    """The robot's CA certificate in the credentials folder; a sentence when it is missing."""
+    path = access.default_folder() / certificates.CA
+    if not path.is_file():
+        raise Unavailable(f"A tls/ router needs its CA certificate, and {path} does not exist: copy "
+                          f"{certificates.CA} from the robot's credentials folder into {path.parent} "
+                          f"(or set {access.ACCESS_ENV} to the folder that has it).")
+    return path
 
 
 def router_config(endpoint: str, credentials: Path | str | None = None) -> zenoh.Config:
     """A router on `endpoint`; with a credentials folder (asibot.access) it admits only the
     logins of its dictionary and applies the roles' access control."""
     cfg = _base_config("router")
-    cfg.insert_json5("listen/endpoints", json.dumps([endpoint]))
+    endpoints = listen_endpoints(endpoint)
+    cfg.insert_json5("listen/endpoints", json.dumps(endpoints))
     if credentials is not None:
         dictionary = access.router_dictionary(credentials)
         cfg.insert_json5("transport/auth/usrpwd", json.dumps({"dictionary_file": str(dictionary)}))
         cfg.insert_json5("access_control", json.dumps(access.access_control()))
+    if any(e.startswith(TLS) for e in endpoints):
+        if credentials is None:
+            raise ValueError(f"{endpoint}: a tls/ endpoint is for a router with access control; give it "
+                             f"the credentials folder ({access.ACCESS_ENV} or --access), which holds its "
+                             "certificate")
+        folder = Path(credentials)
+        cert, key = folder / certificates.ROUTER, folder / certificates.ROUTER_KEY
+        if not (cert.is_file() and key.is_file()):
+            raise ValueError(f"{cert} or {key.name} does not exist: make them on the robot with "
+                             f"`{access.ACCESS_ENV}={folder} python -m asibot.access`")
+        cfg.insert_json5("transport/link/tls/listen_certificate", json.dumps(str(cert)))
+        cfg.insert_json5("transport/link/tls/listen_private_key", json.dumps(str(key)))
     return cfg
+
+
+def listen_endpoints(endpoint: str) -> list[str]:
+    """`tcp/127.0.0.1:7447,tls/0.0.0.0:7448` -> both: loopback for the robot's own services,
+    TLS for other machines."""
+    endpoints = [e.strip() for e in endpoint.split(",") if e.strip()]
+    if not endpoints:
+        raise ValueError("the router needs an endpoint to listen on, such as tcp/127.0.0.1:7447")
+    return endpoints
 
 
 def _no_router(endpoint: str, login: access.Login | None) -> str:
@@ -76,8 +113,11 @@ def _no_router(endpoint: str, login: access.Login | None) -> str:
         return (f"No Zenoh router answers at {endpoint}. Start it with `asibot router` or "
                 f"`asibot up`, or set {ROUTER_ENV}; if that router runs with access control, set "
                 f"{access.ACCESS_ENV} to its credentials folder.")
+    tls = (f", or its certificate is not issued by {access.default_folder() / certificates.CA} for the "
+           "name dialled (copy ca.pem again; dial a name the router's certificate holds)"
+           if endpoint.startswith(TLS) else "")
     return (f"No Zenoh router at {endpoint} accepted the login {login.user!r} from "
-            f"{access.default_folder()}: start the router (`asibot up`), copy that folder again "
+            f"{access.default_folder()}{tls}: start the router (`asibot up`), copy that folder again "
             f"from the robot if the password changed, or unset {access.ACCESS_ENV} if the router "
             "runs without access control.")
 
@@ -164,6 +204,15 @@ class ZenohBus(Bus):
         _steady_malloc()
         super().__init__(name, router_endpoint(endpoint))
         self.session = open_client(self.endpoint, wait=wait, stop=stop, name=name)
+        self._refusals: dict[tuple[str, str], str | None] = {}
+
+    def refusal(self, message: str, key: str) -> str | None:
+        # Asked per call and per publish: the login file is read once per (message, key).
+        try:
+            return self._refusals[message, key]
+        except KeyError:
+            why = self._refusals[message, key] = access.refusal(self.name, message, key)
+            return why
 
     def _declare_publisher(self, key: str, express: bool, block: bool) -> _Publisher:
         cc = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP

@@ -6,12 +6,12 @@ most the last second; `asibot.recording.reader.iter_messages` reads such a file 
 complete chunk.
 
     python -m asibot.recording [--dir recordings] [--exclude 'rb/*/camera/**'] [--camera-hz 2]
-        [--max-bytes 10G] [--max-age-days 30] [--max-file-bytes 500M]
+        [--max-bytes 10G] [--max-age-days DAYS] [--max-file-bytes 500M]
 
 A session is split into parts of at most `--max-file-bytes` (plus one chunk), so rotation can
 delete a long session piece by piece and each file stays quick to export. Camera images are
 recorded at `--camera-hz` (`asibot.recording.thinning`), and the folder is kept within
-`--max-bytes` and `--max-age-days` by deleting the oldest recordings
+`--max-bytes` (and `--max-age-days`, when given) by deleting the oldest recordings
 (`asibot.recording.rotation`).
 """
 
@@ -257,7 +257,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-bytes", type=byte_size, default=DEFAULT_MAX_BYTES,
                    help=f"the oldest recordings are deleted past this total (default {DEFAULT_MAX_BYTES / 1e9:g}G; 0: no limit)")
     p.add_argument("--max-age-days", type=float, default=DEFAULT_MAX_AGE_DAYS,
-                   help=f"recordings older than this are deleted (default {DEFAULT_MAX_AGE_DAYS:g}; 0: kept forever)")
+                   help="recordings older than this are deleted (default: no age limit, only --max-bytes)")
     p.add_argument("--max-file-bytes", type=byte_size, default=DEFAULT_MAX_FILE_BYTES,
                    help=f"a session goes on in a new file (-part2 ...) past this size "
                         f"(default {DEFAULT_MAX_FILE_BYTES / 1e6:g}M; 0: one file)")

@@ -18,7 +18,9 @@ from asibot.recording.reader import NotARecording, check_recording
 log = logging.getLogger("asibot.recorder")
 
 DEFAULT_MAX_BYTES = 10_000_000_000
-DEFAULT_MAX_AGE_DAYS = 30.0
+#: No age limit unless asked: a session a user kept is theirs; the size limit alone keeps
+#: the disk from filling, and removes nothing while there is room.
+DEFAULT_MAX_AGE_DAYS = 0.0
 DAY_S = 86400.0
 
 
