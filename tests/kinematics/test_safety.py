@@ -3,17 +3,19 @@ it, and a movv stream that keeps arriving through a controller restart or an est
 moves nothing until it pauses for one watchdog period (asibot.arming); a movj after the
 recovery moves at once (a new request)."""
 
+import threading
 import time
 
 import numpy as np
 import pytest
 
-from asibot import keys
+from asibot import keys, testing
 from asibot.bus import Bus
+from asibot.client import CartesianClient
 from asibot.errors import RpcError
 from asibot.kinematics.server import KinematicsServer
 from asibot.messages import COMMAND_WATCHDOG_S, EStop
-from asibot.testing import Stream, wait_until
+from asibot.testing import IdealDriver, Stream, wait_until
 
 from .conftest import ROBOT
 from .robot_under_test import asibot_model, asibot_spec
@@ -114,3 +116,45 @@ def test_a_planned_move_after_a_recovery_moves_at_once(client):
     client.movj(joints=[1, 5, 5, 5, 0], duration=0.3)    # a new request: no pause needed
     assert client.wait(timeout=5)
     assert client.state()["joints"] == pytest.approx([1, 5, 5, 5, 0], abs=0.1)
+
+
+def test_a_motion_waits_until_the_driver_names_this_controller_holder(request):
+    """Seen in bench/bench_safety.py (2 runs in 3): a movj sent just after the kinematics
+    service started had its first command reach the arm driver before the service's token;
+    refused, it made the whole movj "a stream from before" the takeover, and nothing moved.
+    Now the first motion waits (once) until the driver's status names this controller."""
+    robot = ROBOT + "-late"
+    with testing.memory_bus(request.node.nodeid):
+        driver = IdealDriver(robot, asibot_spec())
+        driver.set_joints(np.radians(STREAMING_POSE))
+        knows: list[str] = []                       # whom the driver's status names as holder
+        status_bus = Bus("arm_driver")
+        status_bus.serve(keys.driver_rpc(robot, "status"), lambda req: {"controller": "".join(knows[-1:])})
+        server = KinematicsServer(Bus("kinematics"), robot, asibot_model(), asibot_spec(), rate=100.0)
+        sent: list = []
+        real_put = server.cmd_pub.put
+        server.cmd_pub.put = lambda msg: (sent.append(msg), real_put(msg))
+        try:
+            with CartesianClient(robot, timeout=10) as client:
+                wait_until(lambda: server.ctl.q is not None, 5)
+                done: list = []
+                t = threading.Thread(target=lambda: done.append(client.movj(joints=[0, 40, 40, 30, 0])))
+                t.start()
+                time.sleep(0.3)
+                assert sent == [], "a command went out before the driver named this controller"
+                knows.append(server.controller)
+                wait_until(lambda: sent, 2, message="the movj never began once the driver named its holder")
+                t.join(10)
+                assert done
+                wait_until(lambda: not np.allclose(driver.q, np.radians(STREAMING_POSE), atol=1e-4), 5)
+                client.wait()
+                # once named, never asked again: a second motion goes at once
+                knows.append("someone-else")
+                before = len(sent)
+                client.movj(joints=list(STREAMING_POSE))
+                wait_until(lambda: len(sent) > before, 2)
+        finally:
+            server.close()
+            server.bus.close()
+            status_bus.close()
+            driver.close()
