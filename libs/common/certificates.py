@@ -1,10 +1,12 @@
 """Certificates for the router's TLS, so logins cross a network encrypted.
 
-A password sent over plain `tcp/` can be read by anyone on the network, so a router reached
-from other machines listens on `tls/` too. Its certificate is issued by a certificate
+Over plain `tcp/` anyone on the network reads what crosses (commands, robot state, the
+login exchange) and can pose as the router, so a router reached from other machines listens
+on `tls/` too. Its certificate is issued by a certificate
 authority made for this robot alone: clients trust only `ca.pem` (copied with their
 credentials), so no public CA, no internet and no browser exception are involved, and a
-router that moved to another address only needs a new certificate from the same CA.
+router that moved to another address only needs a new certificate from the same CA (delete
+router.pem and run `python -m asibot.access` on the robot).
 
 Files, in the credentials folder (asibot.access): `ca.pem` (public: every client gets it),
 `ca.key` (0600: only to issue the router's certificate again), `router.pem` and `router.key`
@@ -61,7 +63,9 @@ def _write_private(path: Path, data: bytes) -> None:
 
 def ensure_router_certificate(folder: Path, names: list[str] | None = None) -> tuple[Path, Path, Path]:
     """(ca.pem, router.pem, router.key) in `folder`, made on first use for `names` (default:
-    `this_machine()`); existing files are kept, since clients already trust that CA."""
+    `this_machine()`). Existing files are kept, since clients already trust that CA; with
+    router.pem deleted (the robot got a new name or address), the router's certificate is
+    issued again by the same CA, so no client needs a new ca.pem."""
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes, serialization
     from cryptography.hazmat.primitives.asymmetric import ec
@@ -72,34 +76,37 @@ def ensure_router_certificate(folder: Path, names: list[str] | None = None) -> t
         return ca_path, cert_path, key_path
     now = datetime.datetime.now(datetime.timezone.utc)
     start, end = now - datetime.timedelta(minutes=5), now + datetime.timedelta(days=365 * YEARS)
-    pem, pkcs8 = serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8
+    pem, pkcs8, nothing = serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()
+    folder.mkdir(parents=True, exist_ok=True, mode=0o700)
 
-    ca_key = ec.generate_private_key(ec.SECP256R1())
-    ca_name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, f"asibot robot CA ({socket.gethostname()})")])
-    ca = (x509.CertificateBuilder().subject_name(ca_name).issuer_name(ca_name)
-          .public_key(ca_key.public_key()).serial_number(x509.random_serial_number())
-          .not_valid_before(start).not_valid_after(end)
-          .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
-          .add_extension(x509.KeyUsage(digital_signature=False, content_commitment=False,
-                                       key_encipherment=False, data_encipherment=False, key_agreement=False,
-                                       key_cert_sign=True, crl_sign=True, encipher_only=False,
-                                       decipher_only=False), critical=True)
-          .sign(ca_key, hashes.SHA256()))
+    if ca_path.exists() and (folder / CA_KEY).exists():
+        ca = x509.load_pem_x509_certificate(ca_path.read_bytes())
+        ca_key = serialization.load_pem_private_key((folder / CA_KEY).read_bytes(), password=None)
+    else:
+        ca_key = ec.generate_private_key(ec.SECP256R1())
+        ca_name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, f"asibot robot CA ({socket.gethostname()})")])
+        ca = (x509.CertificateBuilder().subject_name(ca_name).issuer_name(ca_name)
+              .public_key(ca_key.public_key()).serial_number(x509.random_serial_number())
+              .not_valid_before(start).not_valid_after(end)
+              .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
+              .add_extension(x509.KeyUsage(digital_signature=False, content_commitment=False,
+                                           key_encipherment=False, data_encipherment=False, key_agreement=False,
+                                           key_cert_sign=True, crl_sign=True, encipher_only=False,
+                                           decipher_only=False), critical=True)
+              .sign(ca_key, hashes.SHA256()))
+        _write_private(folder / CA_KEY, ca_key.private_bytes(pem, pkcs8, nothing))
     router_key = ec.generate_private_key(ec.SECP256R1())
     router = (x509.CertificateBuilder()
               .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "asibot router")]))
-              .issuer_name(ca_name).public_key(router_key.public_key())
+              .issuer_name(ca.subject).public_key(router_key.public_key())
               .serial_number(x509.random_serial_number()).not_valid_before(start).not_valid_after(end)
               .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
               .add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH]), critical=False)
               .add_extension(alt_names(this_machine() if names is None else names), critical=False)
               .sign(ca_key, hashes.SHA256()))
-
-    folder.mkdir(parents=True, exist_ok=True, mode=0o700)
-    nothing = serialization.NoEncryption()
-    _write_private(folder / CA_KEY, ca_key.private_bytes(pem, pkcs8, nothing))
     _write_private(key_path, router_key.private_bytes(pem, pkcs8, nothing))
     _write_private(cert_path, router.public_bytes(pem))
-    _write_private(ca_path, ca.public_bytes(pem))   # last: its presence says the set is whole
-    os.chmod(ca_path, 0o644)
+    if not ca_path.exists():
+        _write_private(ca_path, ca.public_bytes(pem))   # last: its presence says the set is whole
+        os.chmod(ca_path, 0o644)
     return ca_path, cert_path, key_path

@@ -103,6 +103,15 @@ def test_the_credentials_folder_holds_the_robots_ca_and_router_certificate(tmp_p
     before = (folder / certificates.ROUTER).read_bytes()
     access.ensure_credentials(folder)   # kept: clients already trust that CA
     assert (folder / certificates.ROUTER).read_bytes() == before
+    # A new name for the robot: router.pem deleted is issued again by the same CA
+    ca_before = (folder / certificates.CA).read_bytes()
+    (folder / certificates.ROUTER).unlink()
+    certificates.ensure_router_certificate(folder, ["robot.example"])
+    again = x509.load_pem_x509_certificate((folder / certificates.ROUTER).read_bytes())
+    assert (folder / certificates.CA).read_bytes() == ca_before and again.issuer == ca.subject
+    assert again.extensions.get_extension_for_class(x509.SubjectAlternativeName).value \
+        .get_values_for_type(x509.DNSName) == ["localhost", "robot.example"]
+    again.verify_directly_issued_by(ca)
 
 
 def _exchange(sender: Bus, receiver: Bus) -> None:
