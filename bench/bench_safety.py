@@ -49,7 +49,9 @@ REPS = 5
 ARM_STILL = 1e-3        # rad/s: every joint below this counts as stopped
 BASE_STILL = 1e-3       # m/s and rad/s
 BASE_SPEED = 0.3        # m/s of the cmd_vel stream
-FUZZ_REQUESTS = 2000
+FUZZ_REQUESTS = 4000
+#: VmRSS is read after each of these shares of the fuzzed requests: a ceiling, or a growth?
+FUZZ_QUARTERS = 4
 SENDER = """
 import sys, time
 from asibot import keys, ownership, testing
@@ -58,7 +60,7 @@ from asibot.messages import Twist
 robot, vx = sys.argv[1], float(sys.argv[2])
 bus = Bus("bench-sender", wait=20)
 me = ownership.announce(bus, robot, "base", "bench-sender")
-testing.wait_until(lambda: bus.call(keys.driver_rpc(robot, "status"), timeout=2)["controller"] == me, 10)
+testing.wait_until(lambda: bus.call(keys.driver_rpc(robot, "status"), timeout=2)["holders"]["base"] == me, 10)
 time.sleep(0.3)                     # a stream begun after taking hold moves the base at once
 pub = bus.publisher(keys.base_cmd_vel(robot), Twist, express=True)
 testing.Stream(lambda: pub.put(Twist(vx=vx, wz=0.0, controller=me)), period=0.05)
@@ -238,7 +240,7 @@ def base_cruising(trace: Trace) -> bool:
 
 def held_by(bus: Bus, controller: str) -> bool:
     try:
-        return bus.call(keys.driver_rpc(BASE, "status"), timeout=2)["controller"] == controller
+        return bus.call(keys.driver_rpc(BASE, "status"), timeout=2)["holders"]["base"] == controller
     except RpcError:
         return False
 
@@ -374,7 +376,7 @@ def ask(bus: Bus, verb: str, payload: bytes) -> str:
 
 def memory(procs: Processes, rng: random.Random) -> dict[str, object]:
     """RSS of a new kinematics process (the arm driver of part 1 still runs) after warming up,
-    after FUZZ_REQUESTS valid `stat`s, after half and all of FUZZ_REQUESTS fuzzed requests."""
+    after FUZZ_REQUESTS valid `stat`s, after each quarter of FUZZ_REQUESTS fuzzed requests."""
     kinematics = procs.service("asibot.kinematics", "--robot", ARM)
     out: dict[str, object] = {}
     with CartesianClient(ARM, timeout=30) as client, Bus("bench-fuzzer") as bus:
@@ -397,8 +399,8 @@ def memory(procs: Processes, rng: random.Random) -> dict[str, object]:
                 kinds[kind] += 1
                 sent += len(payload)
                 codes[ask(bus, verb, payload)] += 1
-                if i == FUZZ_REQUESTS // 2 - 1:
-                    out["half"] = status_kb(kinematics.pid, "VmRSS")
+                if (i + 1) % (FUZZ_REQUESTS // FUZZ_QUARTERS) == 0:
+                    out.setdefault("after", []).append((i + 1, status_kb(kinematics.pid, "VmRSS")))
         out["fuzz_s"] = time.monotonic() - t
         out["fuzz"] = status_kb(kinematics.pid, "VmRSS")
         out["peak"], out["hwm"] = peak.peak_kb, status_kb(kinematics.pid, "VmHWM")
@@ -447,8 +449,8 @@ def memory_rows(mem: dict[str, object]) -> list[tuple]:
     stat = f"after {FUZZ_REQUESTS} valid stat: {mem['stat'] * mb:.1f} MB"
     return [
         ("kinematics VmRSS after warm-up", mem["start"] * mb, "MB", "-"),
-        (f"kinematics VmRSS after {FUZZ_REQUESTS // 2} fuzzed requests", mem["half"] * mb, "MB", stat),
-        (f"kinematics VmRSS after {FUZZ_REQUESTS} fuzzed requests ({mem['sent_mb']:.0f} MB in {mem['fuzz_s']:.0f} s)",
+        *((f"kinematics VmRSS after {n} fuzzed requests", kb * mb, "MB", stat) for n, kb in mem["after"][:-1]),
+        (f"kinematics VmRSS after all {FUZZ_REQUESTS} fuzzed requests ({mem['sent_mb']:.0f} MB in {mem['fuzz_s']:.0f} s)",
          mem["fuzz"] * mb, "MB", stat),
         ("kinematics VmRSS peak while fuzzed (10 ms samples) / VmHWM", f"{mem['peak'] * mb:.1f} / {mem['hwm'] * mb:.1f}",
          "MB", stat),

@@ -33,9 +33,11 @@ from __future__ import annotations
 
 import secrets
 import threading
-from typing import Any, Callable
+import time
+from typing import Any, Callable, Iterable
 
 from asibot import keys
+from asibot.errors import RpcError
 from asibot.events import CommandRefused
 
 #: The parts of a robot that have a holder: the arm with its gripper, and the mobile base.
@@ -137,3 +139,48 @@ class Holder:
         sender = f"from controller {controller!r}" if controller else "without a controller identity"
         return NotHolder("not_holder", f"it came {sender}, and {holds}; only the controller that holds "
                                        "a robot moves it (see asibot.ownership)")
+
+
+def holders_status(holders: Iterable[Holder]) -> dict:
+    """What a driver's `status` says of who holds its parts: {"holders": {"arm": id}}, with
+    "" for a part no controller holds. `HoldWait` reads it."""
+    return {"holders": {h.part: h.current or "" for h in holders}}
+
+
+class HoldWait:
+    """Once per driver: wait until the robot's driver names `controller` as the holder of `part`.
+
+    A controller's first command can reach the driver a few ms before its liveliness token
+    does. Refused then, it makes the whole motion "a stream that began before this controller
+    took hold" (asibot.arming): a movj right after a start did nothing, and a drive primitive
+    would be lost the same way. So a controller calls `wait` before its first motion request,
+    and `forget` when a driver comes (back), since that driver learns who holds anew.
+    A driver that does not say who holds `part` (no status verb, or no holder of that part
+    in it) is not waited for.
+    """
+
+    def __init__(self, bus: Any, robot: str, part: str, controller: str, poll: float = 0.01) -> None:
+        token_key(robot, part, controller)  # says what a wrong part is
+        self.bus, self.robot, self.part, self.controller, self.poll = bus, robot, part, controller, poll
+        self.held = False
+
+    def forget(self, *_: Any) -> None:
+        """The driver changed: wait again before the next motion (a `bus.watch` callback)."""
+        self.held = False
+
+    def wait(self, deadline: float) -> bool:
+        """Until `deadline` (time.monotonic): True once the driver names us, or does not say."""
+        while not self.held:
+            try:
+                status = self.bus.call(keys.driver_rpc(self.robot, "status"),
+                                       timeout=max(0.05, min(0.5, deadline - time.monotonic())))
+            except RpcError:
+                return False   # no driver answers: the motion request says so itself
+            holder = status.get("holders", {}).get(self.part) if isinstance(status.get("holders"), dict) else None
+            if holder is None or holder == self.controller:
+                self.held = True
+            elif time.monotonic() >= deadline:
+                return False
+            else:
+                time.sleep(self.poll)
+        return True

@@ -23,7 +23,7 @@ from asibot.errors import RpcError
 from asibot.estop import EStopState
 from asibot.events import CommandRefused, EventThrottle, refusal_reason
 from asibot.messages import ArmCommand, ArmState, EStop, Event
-from asibot.ownership import Holder
+from asibot.ownership import Holder, holders_status
 from asibot.runtime import Service
 
 log = logging.getLogger(__name__)
@@ -101,7 +101,7 @@ class ArmDriverService(Service):
         self.driver.set_estop(msg.engaged, msg.reason, msg.by)
 
     def _status(self, request: dict) -> dict:
-        return {"robot": self.robot, "controller": self.holder.current or "", **self.driver.status()}
+        return {"robot": self.robot, **holders_status([self.holder]), **self.driver.status()}
 
     def _reset_fault(self, request: dict) -> dict:
         try:

@@ -18,7 +18,7 @@ from asibot.bus import Bus
 from asibot.estop import EStopState
 from asibot.events import CommandRefused, EventThrottle, refusal_reason
 from asibot.messages import Battery, Bumpers, EStop, Event, Odometry, Sonar, Twist
-from asibot.ownership import Holder
+from asibot.ownership import Holder, holders_status
 from asibot.runtime import Service
 
 from asibot.base_driver.driver import DEFAULT_MAX_VX, DEFAULT_MAX_WZ, BaseDriver
@@ -88,7 +88,7 @@ class BaseDriverService(Service):
         self.driver.set_estop(msg.engaged, msg.reason, msg.by)
 
     def _status(self, request: dict) -> dict:
-        return {"robot": self.robot, "controller": self.holder.current or "", **self.driver.status()}
+        return {"robot": self.robot, **holders_status([self.holder]), **self.driver.status()}
 
     def _reset_fault(self, request: dict) -> dict:
         return self.driver.reset_fault()  # refusals are RpcErrors with the driver's sentence

@@ -82,7 +82,8 @@ class KinematicsServer(Service):
         self._grip: GripperState | None = None
         self._grip_changed = threading.Condition()
         bus.subscribe(keys.gripper_state(robot), GripperState, self._on_gripper)
-        self._holding = False
+        #: Before the first motion for each driver: wait until it names us the holder.
+        self.hold = ownership.HoldWait(bus, robot, "arm", self.controller)
         bus.watch(keys.driver_alive(robot), self._on_driver)
         # The table of requests is the list of verbs: each is served by the method of its name,
         # which receives the checked arguments.
@@ -102,28 +103,9 @@ class KinematicsServer(Service):
                 deadline = time.monotonic() + DRIVER_GRACE
                 while not (self.ctl.driver_alive and self.ctl.q is not None) and time.monotonic() < deadline:
                     time.sleep(0.02)
-                self._wait_until_holding(deadline)
+                self.hold.wait(deadline)
             return method(args)
         return run
-
-    def _wait_until_holding(self, deadline: float) -> None:
-        """Once per driver: wait until the arm driver names this controller as the holder.
-
-        Our first command can reach the driver a few ms before our liveliness token does;
-        refused then, it would make the whole motion "a stream that began before this
-        controller took hold" (asibot.arming), and a movj right after a start did nothing.
-        A driver that does not say who holds the arm (no status verb, or no `controller`
-        in it) is not waited for.
-        """
-        while not self._holding and time.monotonic() < deadline:
-            try:
-                status = self.bus.call(keys.driver_rpc(self.robot, "status"), timeout=0.5)
-            except RpcError:
-                return
-            if status.get("controller", self.controller) == self.controller:
-                self._holding = True
-                return
-            time.sleep(0.01)
 
     # --- bus inputs ---------------------------------------------------------------------
     def _on_arm_state(self, msg: ArmState) -> None:
@@ -140,7 +122,7 @@ class KinematicsServer(Service):
     def _on_driver(self, key: str, alive: bool) -> None:
         was_moving = self.ctl.state != "not_controlling"
         self.ctl.on_driver(alive)
-        self._holding = False    # a driver that comes (back) learns who holds the arm anew
+        self.hold.forget()    # a driver that comes (back) learns who holds the arm anew
         if not alive:
             text = "The arm driver disappeared" + ("; the motion was stopped." if was_moving else ".")
             log.warning(text)

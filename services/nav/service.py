@@ -47,6 +47,10 @@ from asibot.nav.planner import Path as PlannedPath
 log = logging.getLogger("asibot.nav")
 
 NAME = "nav"
+#: The requests that set the base moving: before the first of them for each driver, nav waits
+#: (at most HOLD_GRACE s) until the driver names it as the base's holder (asibot.ownership).
+MOTION_VERBS = frozenset({"goto", "recall_position", "drive", "turn", "primitive", "localize"})
+HOLD_GRACE = 2.0
 SIM_MAPS = Path(__file__).resolve().parent.parent / "sim" / "maps"
 
 
@@ -70,6 +74,9 @@ class NavService(Service):
         self.controller = ownership.announce(bus, robot, "base", "nav")
         self.holder = ownership.Holder(robot, "base")
         self.holder.follow(bus)
+        #: Before the first motion for each driver: wait until it names us the holder.
+        self.hold = ownership.HoldWait(bus, robot, "base", self.controller)
+        bus.watch(keys.driver_alive(robot), self.hold.forget)
         self._latch_map()
         bus.subscribe(keys.base_odom(robot), m.Odometry, self._on_odom)
         bus.subscribe(keys.scan(robot), m.LaserScan, self._on_scan, maxsize=1, ring=True)
@@ -175,6 +182,8 @@ class NavService(Service):
         rpc = getattr(self, f"_rpc_{verb}")
 
         def handle(req: dict) -> dict:
+            if verb in MOTION_VERBS and req.get("name") != "stop":   # a stop is never delayed
+                self.hold.wait(time.monotonic() + HOLD_GRACE)
             with self._lock:
                 reply = rpc(self.clock(), req)
             self._publish_status(force=True)

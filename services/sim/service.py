@@ -25,7 +25,7 @@ from asibot.bus import Bus
 from asibot.errors import MessageError, RpcError
 from asibot.estop import EStopState
 from asibot.events import CommandRefused, EventThrottle, refusal_reason
-from asibot.ownership import Holder
+from asibot.ownership import Holder, holders_status
 from asibot.runtime import Service
 from asibot.sim import viewer
 from asibot.sim.arm import CommandRejected, Notice
@@ -177,8 +177,7 @@ class SimService(Service):
 
     # ------------------------------------------------------------------ RPC
     def _rpc_status(self, req: dict) -> dict:
-        return {**self.sim.status(), "controller": self.holders["arm"].current or "",
-                **({"base_controller": self.holders["base"].current or ""} if "base" in self.holders else {})}
+        return {**self.sim.status(), **holders_status(self.holders.values())}
 
     def _rpc_reset_fault(self, req: dict) -> dict:
         self.sim.reset_fault()

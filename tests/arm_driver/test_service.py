@@ -52,7 +52,7 @@ def test_driver_contract_end_to_end(driver_process):
     # controller that holds the arm (asibot.ownership).
     controller = Bus("fake-controller", wait=5)
     c = ownership.announce(controller, R, "arm", "test")
-    wait_until(lambda: bus.call(keys.driver_rpc(R, "status"))["controller"] == c, 5)
+    wait_until(lambda: bus.call(keys.driver_rpc(R, "status"))["holders"]["arm"] == c, 5)
     cmd = bus.publisher(keys.arm_command(R), ArmCommand)
     assert cmd.wait_for_subscribers(5)
     goal = [0.03, -0.02, 0.01, 0.0, 0.02]

@@ -142,7 +142,7 @@ def test_standalone_processes_emulator_and_driver(router, tmp_path):
         controller = ownership.announce(user, ROBOT, "base", "test")
         inbox = Inbox(user)
         wait_until(lambda: inbox["odom"], 15, message="the driver process published no odometry")
-        wait_until(lambda: user.call(keys.driver_rpc(ROBOT, "status"))["controller"] == controller, 5)
+        wait_until(lambda: user.call(keys.driver_rpc(ROBOT, "status"))["holders"]["base"] == controller, 5)
         pub = user.publisher(keys.base_cmd_vel(ROBOT), Twist)
         end = time.monotonic() + 1.0
         while time.monotonic() < end:

@@ -1,5 +1,7 @@
 """asibot.ownership: which controller holds a part of a robot, from the liveliness tokens."""
 
+import time
+
 import pytest
 
 from asibot import keys, ownership
@@ -63,3 +65,30 @@ def test_holders_follow_the_bus_and_arm_and_base_are_held_apart(memory_bus):
         assert base.current == n
     with pytest.raises(ValueError, match="part must be one of arm, base"):
         ownership.Holder("r", "gripper")
+
+
+def test_hold_wait_asks_the_driver_until_it_names_us_and_not_after(memory_bus):
+    robot = "hold-wait"
+    bus = Bus("kinematics", memory_bus)
+    try:
+        hold = ownership.HoldWait(bus, robot, "arm", "k-1", poll=0.005)
+        assert not hold.wait(time.monotonic() + 0.2)                  # no driver answers: not held
+        said: list = [{"holders": {"arm": "k-0"}}]
+        asked: list = []
+        driver = Bus("arm_driver", memory_bus)
+        driver.serve(keys.driver_rpc(robot, "status"), lambda req: asked.append(1) or said[-1])
+        assert not hold.wait(time.monotonic() + 0.1) and asked       # another holds it
+        said.append({"holders": {"arm": "k-1"}})
+        assert hold.wait(time.monotonic() + 2) and hold.held
+        n = len(asked)
+        assert hold.wait(time.monotonic() + 2) and len(asked) == n   # asked once per driver
+        hold.forget()
+        said.append({"robot": robot})                                   # a driver that does not say
+        assert hold.wait(time.monotonic() + 2)
+        base = ownership.HoldWait(bus, robot, "base", "nav-1")         # says nothing of the base
+        assert base.wait(time.monotonic() + 2)
+        with pytest.raises(ValueError, match="part must be one of arm, base"):
+            ownership.HoldWait(bus, robot, "wheel", "x")
+        driver.close()
+    finally:
+        bus.close()

@@ -32,7 +32,7 @@ def test_the_emulated_profile_drives_both_robots(up):
     # The base: ARCOS over TCP to the emulated P3-AT, cmd_vel in (from the controller that
     # holds the base: this test, asibot.ownership), odometry out.
     controller = ownership.announce(stack.bus, "pioneer", "base", "test")
-    wait_until(lambda: stack.bus.call(keys.driver_rpc("pioneer", "status"))["controller"] == controller, 10)
+    wait_until(lambda: stack.bus.call(keys.driver_rpc("pioneer", "status"))["holders"]["base"] == controller, 10)
     odom: list[Odometry] = []
     stack.bus.subscribe(keys.base_odom("pioneer"), Odometry, odom.append)
     wait_until(lambda: odom, 10)

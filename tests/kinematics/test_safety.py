@@ -129,7 +129,7 @@ def test_a_motion_waits_until_the_driver_names_this_controller_holder(request):
         driver.set_joints(np.radians(STREAMING_POSE))
         knows: list[str] = []                       # whom the driver's status names as holder
         status_bus = Bus("arm_driver")
-        status_bus.serve(keys.driver_rpc(robot, "status"), lambda req: {"controller": "".join(knows[-1:])})
+        status_bus.serve(keys.driver_rpc(robot, "status"), lambda req: {"holders": {"arm": "".join(knows[-1:])}})
         server = KinematicsServer(Bus("kinematics"), robot, asibot_model(), asibot_spec(), rate=100.0)
         sent: list = []
         real_put = server.cmd_pub.put

@@ -65,7 +65,7 @@ def test_the_sim_process_speaks_the_driver_contract(sim_process):
         wait_until(lambda: arm.last() is not None and depth.last() is not None, timeout=10)
         # The test holds the arm and the base (asibot.ownership).
         arm_ctl, base_ctl = (ownership.announce(bus, ROBOT, part, "test") for part in ("arm", "base"))
-        wait_until(lambda: bus.call(keys.driver_rpc(ROBOT, "status"), {})["controller"] == arm_ctl, timeout=5)
+        wait_until(lambda: bus.call(keys.driver_rpc(ROBOT, "status"), {})["holders"]["arm"] == arm_ctl, timeout=5)
         t1 = time.monotonic()
         time.sleep(1.0)
         assert len(arm.since(t1)) >= 50   # >= 50 Hz by contract; 100 Hz nominal
