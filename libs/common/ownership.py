@@ -176,7 +176,8 @@ class HoldWait:
                                        timeout=max(0.05, min(0.5, deadline - time.monotonic())))
             except RpcError:
                 return False   # no driver answers: the motion request says so itself
-            holder = status.get("holders", {}).get(self.part) if isinstance(status.get("holders"), dict) else None
+            holders = status.get("holders")
+            holder = holders.get(self.part) if isinstance(holders, dict) else None
             if holder is None or holder == self.controller:
                 self.held = True
             elif time.monotonic() >= deadline:
