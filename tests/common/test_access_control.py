@@ -285,8 +285,8 @@ def test_asibot_up_with_access_makes_the_logins_and_admits_only_them(tmp_path):
     try:
         def status() -> str:
             r = _cli("status", env=env)
-            return r.stdout if r.returncode == 0 and "recorder" in r.stdout else ""
-        assert "router" in wait_until(status, 30, interval=0.3)
+            return r.stdout if r.returncode == 0 and "recorder" in r.stdout and "router" in r.stdout else ""
+        wait_until(status, 30, interval=0.3, message="asibot status never listed the router and the recorder")
         assert stat.S_IMODE(folder.stat().st_mode) == 0o700
         anonymous = _cli("status", "--wait", "1", env={k: v for k, v in env.items() if k != access.ACCESS_ENV})
         assert anonymous.returncode == 1 and "set ASIBOT_ACCESS to its credentials folder" in anonymous.stderr

@@ -146,7 +146,8 @@ def test_asking_yes_first_is_set_on_the_page_and_a_task_heard_then_waits_for_yes
         assert http(kitchen_voice, "GET", "/api/voice") == {"confirm": False}
 
 
-def test_a_made_up_word_is_recorded_by_saying_it_on_the_page_and_then_launches_its_task(kitchen_voice, tmp_path):
+def test_a_made_up_word_is_recorded_by_saying_it_on_the_page_and_then_launches_its_task(kitchen_voice, tmp_path,
+                                                                                      burners_paused):
     """'zorblat' is in no dictionary: the voice service cannot listen for it until the page's
     "Record by saying it" has learned how it is said from the microphone."""
     http(kitchen_voice, "POST", "/api/words", {"text": "zorblat"})
