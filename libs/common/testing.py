@@ -76,15 +76,19 @@ def scheduling_delay(samples: int = 20, period: float = 0.005) -> float:
 
 
 def wait_until(predicate: Callable[[], object], timeout: float = 5.0, interval: float = 0.01,
-               message: str = "") -> object:
-    """Poll until predicate() is truthy; return its value or raise AssertionError on timeout."""
+               message: str | Callable[[], str] = "") -> object:
+    """Poll until predicate() is truthy; return its value or raise AssertionError on timeout.
+
+    `message` may be a function, called at the timeout, to say the state then rather than
+    the state when the wait began."""
     deadline = time.monotonic() + timeout
     while True:
         value = predicate()
         if value:
             return value
         if time.monotonic() > deadline:
-            raise AssertionError(message or f"condition not met within {timeout} s")
+            said = message() if callable(message) else message
+            raise AssertionError(said or f"condition not met within {timeout} s")
         time.sleep(interval)
 
 

@@ -30,7 +30,7 @@ import numpy as np
 from asibot import keys, ownership
 from asibot import messages as m
 from asibot.bus import Bus
-from asibot.errors import arguments as _only, quote
+from asibot.errors import RpcError, arguments as _only, quote
 from asibot.estop import EStopState
 from asibot.files import data_dir
 from asibot.runtime import Service
@@ -47,8 +47,9 @@ from asibot.nav.planner import Path as PlannedPath
 log = logging.getLogger("asibot.nav")
 
 NAME = "nav"
-#: The requests that set the base moving: before the first of them for each driver, nav waits
-#: (at most HOLD_GRACE s) until the driver names it as the base's holder (asibot.ownership).
+#: The requests that set the base moving: refused while another controller holds the base;
+#: before the first of them for each driver, nav waits (at most HOLD_GRACE s) until the
+#: driver names it as the base's holder (asibot.ownership).
 MOTION_VERBS = frozenset({"goto", "recall_position", "drive", "turn", "primitive", "localize"})
 HOLD_GRACE = 2.0
 SIM_MAPS = Path(__file__).resolve().parent.parent / "sim" / "maps"
@@ -183,6 +184,10 @@ class NavService(Service):
 
         def handle(req: dict) -> dict:
             if verb in MOTION_VERBS and req.get("name") != "stop":   # a stop is never delayed
+                holder = self.holder.current
+                if holder is not None and holder != self.controller:   # said at once, not after the grace
+                    raise RpcError("busy", f"Another program drives the base of {self.robot} ({holder}); "
+                                           "stop it first.")
                 self.hold.wait(time.monotonic() + HOLD_GRACE)
             with self._lock:
                 reply = rpc(self.clock(), req)
@@ -192,9 +197,6 @@ class NavService(Service):
 
     def _rpc_goto(self, now: float, req: dict) -> dict:
         _only(req, "goto", "place", "pose")
-        holder = self.holder.current
-        if holder is not None and holder != self.controller:
-            raise NavError(f"Another program drives the base of {self.robot} ({holder}); stop it first.")
         return self.pilot.goto(now, req.get("place"), req.get("pose"))
 
     def _rpc_cancel(self, now: float, req: dict) -> dict:

@@ -11,10 +11,13 @@ from __future__ import annotations
 import threading
 import time
 
-from asibot import keys
+import pytest
+
+from asibot import keys, ownership
 from asibot import messages as m
 from asibot.bus import Bus
 from asibot.client import NavClient
+from asibot.errors import RpcError
 from asibot.nav.geometry import Pose
 from asibot.nav.service import NavService
 from asibot.testing import wait_until
@@ -74,3 +77,34 @@ def test_the_first_primitive_waits_until_the_driver_names_nav_holder(memory_bus,
         svc.close()
         driver.close()
         bus.close()
+
+
+def test_while_another_program_holds_the_base_nav_says_so_at_once(memory_bus, apartment, world_places):
+    other = Bus("joystick", memory_bus)
+    # Alive before nav, and first by id among those nav finds at its start ("joystick-" sorts
+    # before "nav-"): it holds the base in nav's view as in the driver's.
+    teleop = ownership.announce(other, ROBOT, "base", "joystick")
+    bus = Bus("nav", memory_bus)
+    svc = NavService(bus, ROBOT, apartment, world_places, START, run_loop=False)
+    driver = Bus("base_driver", memory_bus)
+    asked: list[dict] = []
+
+    def status(req: dict) -> dict:
+        asked.append(req)
+        return {"holders": {"base": teleop}}
+    driver.serve(keys.driver_rpc(ROBOT, "status"), status)
+    try:
+        wait_until(lambda: svc.holder.current == teleop, 5)
+        with NavClient(ROBOT, timeout=10) as nav:
+            for move in (lambda: nav.primitive("forward"), lambda: nav.goto("fridge"), lambda: nav.turn(90)):
+                with pytest.raises(RpcError, match=f"Another program drives the base of {ROBOT} \\({teleop}\\)") as err:
+                    move()
+                assert err.value.code == "busy"
+            assert asked == [], "nav waited for the driver to name it, though another program held the base"
+            assert not svc.pilot._driving
+            nav.primitive("stop")                     # a stop is always taken
+    finally:
+        svc.close()
+        driver.close()
+        bus.close()
+        other.close()
