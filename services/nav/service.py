@@ -47,10 +47,13 @@ from asibot.nav.planner import Path as PlannedPath
 log = logging.getLogger("asibot.nav")
 
 NAME = "nav"
-#: The requests that set the base moving: refused while another controller holds the base;
-#: before the first of them for each driver, nav waits (at most HOLD_GRACE s) until the
-#: driver names it as the base's holder (asibot.ownership).
+#: The requests that set the base moving (or stop nav's own motion, localize): before the
+#: first of them for each driver, nav waits (at most HOLD_GRACE s) until the driver names it
+#: as the base's holder (asibot.ownership).
 MOTION_VERBS = frozenset({"goto", "recall_position", "drive", "turn", "primitive", "localize"})
+#: Those that drive the base somewhere: refused at once while another controller holds it.
+#: Not localize: it only forgets where the robot is, while a joystick may drive it around.
+DRIVING_VERBS = MOTION_VERBS - {"localize"}
 HOLD_GRACE = 2.0
 SIM_MAPS = Path(__file__).resolve().parent.parent / "sim" / "maps"
 
@@ -183,11 +186,12 @@ class NavService(Service):
         rpc = getattr(self, f"_rpc_{verb}")
 
         def handle(req: dict) -> dict:
-            if verb in MOTION_VERBS and req.get("name") != "stop":   # a stop is never delayed
-                holder = self.holder.current
-                if holder is not None and holder != self.controller:   # said at once, not after the grace
-                    raise RpcError("busy", f"Another program drives the base of {self.robot} ({holder}); "
-                                           "stop it first.")
+            stop = req.get("name") == "stop"      # never delayed (the bus passes maps only)
+            holder = self.holder.current
+            if verb in DRIVING_VERBS and not stop and holder not in (None, self.controller):
+                raise RpcError("busy", f"Another program drives the base of {self.robot} ({holder}); "
+                                       "stop it first.")
+            if verb in MOTION_VERBS and not stop:
                 self.hold.wait(time.monotonic() + HOLD_GRACE)
             with self._lock:
                 reply = rpc(self.clock(), req)
