@@ -10,7 +10,12 @@ from __future__ import annotations
 import contextlib
 import os
 import tempfile
+import time
 from pathlib import Path
+
+#: A temporary file of write_atomic this much older than now was left by a killed process
+#: (a younger one may be another process's save in progress).
+LEFTOVER_AGE_S = 60.0
 
 
 def data_dir() -> Path:
@@ -37,6 +42,19 @@ def write_atomic(path: Path, data: bytes) -> None:
             os.unlink(tmp)
         raise
     fsync_dir(path.parent)
+
+
+def remove_leftovers(folder: Path) -> list[Path]:
+    """Delete the temporary files write_atomic left in `folder` and below when its process was
+    killed mid-save (the file it was replacing is whole); the paths removed."""
+    removed = []
+    now = time.time()
+    for path in folder.rglob(".*.tmp"):
+        with contextlib.suppress(OSError):   # gone already, or not ours to delete
+            if path.is_file() and now - path.stat().st_mtime > LEFTOVER_AGE_S:
+                path.unlink()
+                removed.append(path)
+    return removed
 
 
 def fsync_dir(folder: Path) -> None:

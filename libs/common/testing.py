@@ -233,6 +233,30 @@ class Stack:
     def log(self) -> str:
         return self.log_path.read_text()
 
+    def web_session(self) -> str:
+        """The session token the page's server writes into the page (asibot.web.guard)."""
+        import re
+        import urllib.request
+        with urllib.request.urlopen(self.web_url, timeout=10) as reply:
+            found = re.search(r'<meta name="asibot-session" content="([^"]+)">', reply.read().decode())
+        assert found, "the page carries no session token"
+        return found.group(1)
+
+    def web(self, method: str, path: str, body: object = None) -> tuple[int, Any]:
+        """One call of the page's API as the page makes it: (HTTP status, the JSON answer).
+        `body`: a JSON value, or bytes sent as they are."""
+        import json
+        import urllib.error
+        import urllib.request
+        data = body if isinstance(body, bytes) or body is None else json.dumps(body).encode()
+        request = urllib.request.Request(self.web_url.rstrip("/") + path, data=data, method=method, headers={
+            "Content-Type": "application/json", "X-Asibot-Session": self.web_session()})
+        try:
+            with urllib.request.urlopen(request, timeout=10) as reply:
+                return reply.status, json.loads(reply.read() or b"null")
+        except urllib.error.HTTPError as exc:
+            return exc.code, json.loads(exc.read() or b"null")
+
     def wait_alive(self, *services: str, timeout: float = 60.0) -> list[str]:
         """Wait until each `<service>/<instance>` announces itself; the live service keys."""
         want = {keys.service(*s.split("/", 1)) for s in services}

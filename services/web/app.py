@@ -17,12 +17,13 @@ from pathlib import Path
 from typing import Any
 
 from fastapi import FastAPI, WebSocket, WebSocketDisconnect
-from fastapi.responses import FileResponse, JSONResponse, Response
+from fastapi.responses import HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, ConfigDict, StrictBool
 
 from asibot.errors import RpcError
-from asibot.web import errors, lan
+from asibot.local_http import Callers
+from asibot.web import errors, guard, lan
 from asibot.web.api_files import ICON_LIMIT, IMPORT_LIMIT
 from asibot.web.api_files import router as files_router
 from asibot.web import api_base
@@ -37,8 +38,12 @@ from asibot.web.userdata import UserData
 from asibot.web.voice_relay import MicError, VoiceRelay
 
 STATIC = Path(__file__).resolve().parent / "static"
+#: The line of index.html after which the page's session token is written.
+CHARSET = '<meta charset="utf-8">'
 #: Largest request body, bytes; uploads have their own, larger limits.
 BODY_LIMIT = 1024 * 1024
+#: Largest text message of the page's WebSocket, characters (a pointer report is about 200).
+PAGE_MESSAGE_LIMIT = 16 * 1024
 UPLOAD_PATHS = {"/api/icons": ICON_LIMIT + 64 * 1024, "/api/import": IMPORT_LIMIT + 64 * 1024}
 
 log = logging.getLogger("asibot.web")
@@ -57,6 +62,9 @@ class Web:
     tasks: TaskDesk
     voice: VoiceRelay
     phones: lan.PhoneAccess = field(default_factory=lan.PhoneAccess)
+    #: Who may call the server (its Host names), and the token its own pages carry (guard.py).
+    callers: Callers = field(default_factory=Callers)
+    session: str = field(default_factory=guard.new_session)
 
 
 class BodyLimit:
@@ -86,8 +94,15 @@ class BodyLimit:
                 raise _TooBig()
             return message
 
+        async def answer(message: dict) -> None:
+            # A body parser that meets _TooBig answers 400 itself: the answer is 413 all the same.
+            if seen <= limit:
+                await send(message)
+            elif message["type"] == "http.response.start":
+                await too_big(scope, receive, send)
+
         try:
-            await self.app(scope, counted, send)
+            await self.app(scope, counted, answer)
         except _TooBig:
             await too_big(scope, receive, send)
 
@@ -168,11 +183,14 @@ def create_app(web: Web) -> FastAPI:
                 await asyncio.to_thread(_stop_quietly, web, page.holding)
 
     @app.get("/", include_in_schema=False)
-    def index() -> FileResponse:
-        return FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-cache"})
+    def index() -> HTMLResponse:
+        # Read each time (edit and reload); it carries the session token, so no cache keeps it.
+        page = (STATIC / "index.html").read_text(encoding="utf-8").replace(
+            CHARSET, f'{CHARSET}\n  <meta name="{guard.META}" content="{web.session}">', 1)
+        return HTMLResponse(page, headers={"Cache-Control": "no-store"})
 
     app.mount("/static", StaticFiles(directory=STATIC), name="static")
-    return BodyLimit(app)  # type: ignore[return-value]
+    return guard.PageGuard(BodyLimit(app), web.callers, web.session)  # type: ignore[return-value]
 
 
 def _stop_quietly(web: Web, robot: str) -> None:
@@ -211,9 +229,11 @@ async def _on_page_message(web: Web, page, text: str) -> None:
     handheld pointer (asibot.web.pointer), `release` when either ends; `mic` starts or stops
     the page's microphone."""
     try:
+        if len(text) > PAGE_MESSAGE_LIMIT:
+            raise ValueError("too long")
         msg = json.loads(text)
         kind = msg["type"]
-    except (ValueError, KeyError, TypeError):
+    except (ValueError, KeyError, TypeError, RecursionError):   # RecursionError: JSON nested too deep
         await page.socket.send_text(json.dumps({"type": "refused", "text": "The page sent a message the server does not understand."}))
         return
     if kind == "mic":             # the page starts listening (rate: Hz) or stops (rate: null)

@@ -10,6 +10,7 @@ from __future__ import annotations
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException
 
 from asibot.errors import RpcError
 from asibot.web.userdata import AlreadyExists, NotFound, UserDataError
@@ -56,6 +57,16 @@ def install(app: FastAPI) -> None:
     async def data(request: Request, exc: UserDataError) -> JSONResponse:
         status = 404 if isinstance(exc, NotFound) else 409 if isinstance(exc, AlreadyExists) else 400
         return refusal(status, "not_found" if status == 404 else "exists" if status == 409 else "bad_request", str(exc))
+
+    @app.exception_handler(HTTPException)
+    async def http(request: Request, exc: HTTPException) -> JSONResponse:
+        # Starlette's own refusals (a body that is not JSON or nested too deep, an unknown path):
+        # the same shape as ours, so the page shows a sentence.
+        detail = exc.detail if isinstance(exc.detail, str) else "The request was refused."
+        code = "not_found" if exc.status_code == 404 else "bad_request"
+        if exc.status_code == 400:
+            detail = detail.rstrip(".") + ": send the fields as one JSON object"
+        return refusal(exc.status_code, code, detail.rstrip(".") + ".")
 
     @app.exception_handler(RequestValidationError)
     async def invalid(request: Request, exc: RequestValidationError) -> JSONResponse:

@@ -51,14 +51,19 @@ class JogSettings:
                 "point_axes": [{"name": n, "unit": u} for n, u in POINT_AXES]}
 
 
+def _whole(value: object) -> bool:
+    """An int that is not a bool (JSON's `true` is not the number 1 here)."""
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
 def _level(level: int) -> float:
-    if not isinstance(level, int) or not 1 <= level <= len(SPEED_LEVELS):
+    if not _whole(level) or not 1 <= level <= len(SPEED_LEVELS):
         raise RpcError("bad_request", f"The speed level must be 1 to {len(SPEED_LEVELS)}; got {level!r}.")
     return SPEED_LEVELS[level - 1]
 
 
 def _direction(direction: int) -> int:
-    if direction not in (-1, 1):
+    if not _whole(direction) or direction not in (-1, 1):
         raise RpcError("bad_request", f"The direction must be -1 or 1; got {direction!r}.")
     return direction
 
@@ -133,7 +138,7 @@ class Motion:
         size = n_joints if space == "joint" else len(POINT_AXES)
         if space not in ("joint", "cartesian"):
             raise RpcError("bad_request", f"The space must be 'joint' or 'cartesian'; got {space!r}.")
-        if not isinstance(axis, int) or not 0 <= axis < size:
+        if not _whole(axis) or not 0 <= axis < size:
             raise RpcError("bad_request", f"The axis must be 0 to {size - 1}; got {axis!r}.")
         if space == "joint":
             top = self.settings.hold_joint

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import uvicorn
 
-from asibot import runtime
+from asibot import local_http, runtime
 from asibot.bus import Bus
 from asibot.web import lan as lan_access
 from asibot.web.app import Web, create_app
@@ -29,6 +29,8 @@ from asibot.web.userdata import UserData, default_root
 from asibot.web.voice_relay import VoiceRelay
 
 NAME = "web"
+#: More names the page is opened by (comma-separated: a reverse proxy's, a robot's DNS name).
+HOSTS_ENV = "ASIBOT_WEB_HOSTS"
 
 log = logging.getLogger("asibot.web")
 
@@ -62,8 +64,12 @@ class WebService(runtime.Service):
             on_exit=self._ended,
             stop_robot=lambda robot: _stop_quietly(motion, robot))
         tasks = TaskDesk(bus, data, runner, is_live=lambda robot: robot in self.fleet.ids())
+        names = [host, *local_http.names_from_env(HOSTS_ENV)]
+        if lan:
+            names += [*lan_access.lan_addresses(), socket.gethostname(), f"{socket.gethostname()}.local"]
         self.web = Web(fleet=self.fleet, motion=motion, data=data, runner=runner, live=live,
-                       cameras=Cameras(bus), tasks=tasks, voice=VoiceRelay(bus, live.send))
+                       cameras=Cameras(bus), tasks=tasks, voice=VoiceRelay(bus, live.send),
+                       callers=local_http.Callers(n for n in names if n not in ("0.0.0.0", "::")))
         self.app = create_app(self.web)
         tls: dict = {}
         if lan:

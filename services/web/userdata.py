@@ -37,7 +37,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Callable, ParamSpec, TypeVar
 
-from asibot.files import data_dir, fsync_dir, write_atomic
+from asibot.files import data_dir, fsync_dir, remove_leftovers, write_atomic
 from asibot.web import naming
 
 log = logging.getLogger(__name__)
@@ -56,6 +56,11 @@ MAX_ICON_BYTES = 2 * 1024 * 1024
 MAX_LIST_BYTES = 1024 * 1024
 MAX_TASK_BYTES = 4096
 VERSIONS_KEPT = 20
+#: How much the folder keeps: programs, uploaded icons, and their bytes together (versions and
+#: the trash are bounded by VERSIONS_KEPT and by what was once within these).
+MAX_PROGRAMS = 200
+MAX_ICONS = 100
+MAX_STORED_BYTES = 32 * 1024 * 1024
 #: Limits on an imported zip: a zip bomb is refused before it fills the disk or the memory.
 MAX_ZIP_ENTRIES = 2000
 MAX_ZIP_TOTAL = 64 * 1024 * 1024
@@ -331,6 +336,8 @@ class UserData:
         self.versions_dir = self.root / ".versions"
         self.trash_dir = self.root / ".trash"
         self._lock = threading.RLock()  # re-entrant: save_task adds words, import saves programs
+        for path in remove_leftovers(self.root):
+            log.info("removed %s, left by a save that was cut short", path)
 
     # ------------------------------------------------------------------------------ points
 
@@ -426,6 +433,7 @@ class UserData:
         if path.exists():
             raise AlreadyExists(f"A program named {_quote(name)} already exists.")
         text = resources.files("asibot.examples").joinpath("template.py").read_text(encoding="utf-8")
+        self._room_for("program", len(text.encode()))
         write_atomic(path, text.encode())
         return text
 
@@ -439,7 +447,10 @@ class UserData:
             old = path.read_bytes()
             if old == text.encode():
                 return
+            self._room_for("program", len(text.encode()) - len(old), new=False)
             self._keep_version(name, old)
+        else:
+            self._room_for("program", len(text.encode()))
         write_atomic(path, text.encode())
 
     @_locked
@@ -662,8 +673,22 @@ class UserData:
                 return name  # the same image uploaded again
             n += 1
             name = f"{stem}-{n}{ext}"
+        self._room_for("icon", len(data))
         write_atomic(self.icons_dir / name, bytes(data))
         return name
+
+    def _room_for(self, kind: str, grows: int, new: bool = True) -> None:
+        """Refuse, with a sentence, a file that would take the folder past its limits."""
+        programs = [p for p in self.root.glob("*.py") if p.is_file()]
+        icons = [p for p in self.icons_dir.glob("*") if p.is_file()] if self.icons_dir.is_dir() else []
+        count, most = (len(programs), MAX_PROGRAMS) if kind == "program" else (len(icons), MAX_ICONS)
+        if new and count >= most:
+            raise UserDataError(f"There are {count} {kind}s already, the most this folder keeps: "
+                                f"delete one you no longer use first.")
+        stored = sum(p.stat().st_size for p in programs + icons)
+        if stored + grows > MAX_STORED_BYTES:
+            raise UserDataError(f"Programs and icons take {stored / 2**20:.1f} MiB; this {kind} would take them "
+                                f"past {MAX_STORED_BYTES // 2**20} MiB. Delete programs or icons you no longer use first.")
 
     @_locked
     def icon_file(self, name: str) -> Path:

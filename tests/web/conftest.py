@@ -110,7 +110,7 @@ def web(tmp_path_factory):
         web_bus = Bus("web")
         svc = service.build(web_bus, argparse.Namespace(host="127.0.0.1", port=8080, lan=False, new_token=False,
                                                          data=tmp_path_factory.mktemp("data")))
-        client = TestClient(svc.app)
+        client = page_client(svc)
         wait_until(lambda: API_ROBOT in svc.fleet.ids() and svc.fleet.point(API_ROBOT) is not None, timeout=10)
         yield client, svc, driver, server
         svc.close()
@@ -118,6 +118,12 @@ def web(tmp_path_factory):
         driver.close()
         for bus in (web_bus, kin_bus):
             bus.close()
+
+
+def page_client(svc) -> TestClient:
+    """A test client that calls the API as the served page does: by the server's own name, with
+    its session token (asibot.web.guard)."""
+    return TestClient(svc.app, base_url="http://127.0.0.1:8080", headers={"X-Asibot-Session": svc.web.session})
 
 
 def settle(web) -> None:

@@ -44,11 +44,9 @@ KITCHEN_VIEWS = [v for v in READY if v not in APARTMENT_VIEWS]
 
 
 def http(stack, method: str, path: str, body: dict | None = None) -> dict:
-    data = None if body is None else json.dumps(body).encode()
-    request = urllib.request.Request(stack.web_url + path, data=data, method=method,
-                                     headers={"Content-Type": "application/json"})
-    with urllib.request.urlopen(request, timeout=10) as reply:
-        return json.loads(reply.read() or b"{}")
+    status, answer = stack.web(method, "/" + path.lstrip("/"), body)
+    assert status < 400, f"{method} {path}: {status} {answer}"
+    return answer or {}
 
 
 @pytest.fixture(scope="module")

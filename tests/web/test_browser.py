@@ -225,13 +225,13 @@ def test_hold_to_move_moves_while_held_and_stops_when_let_go(browser, kitchen, a
 
 
 def test_estop_during_a_running_program_stops_the_arm_and_the_program(page, kitchen, arm):
-    api = page.request
-    api.post(kitchen.web_url + "api/programs", data={"name": "slow_wave"})
+    api, own = page.request, {"X-Asibot-Session": kitchen.web_session()}
+    api.post(kitchen.web_url + "api/programs", data={"name": "slow_wave"}, headers=own)
     program = ("import sys\nfrom asibot.client import CartesianClient\n"
                "robot = CartesianClient(sys.argv[1])\n"
                "print('waving', flush=True)\n"
                "robot.movj(joints=[60, 10, 10, 10, 0], duration=20)\nrobot.wait()\n")
-    assert api.put(kitchen.web_url + "api/programs/slow_wave", data={"text": program}).ok
+    assert api.put(kitchen.web_url + "api/programs/slow_wave", data={"text": program}, headers=own).ok
     page.goto(kitchen.web_url + "#launcher")
     page.goto(kitchen.web_url + "#program")
     page.get_by_role("button", name="slow_wave").click()

@@ -98,7 +98,7 @@ def test_on_this_machine_only_home_says_how_to_reach_a_phone(tmp_path):
     with memory_bus("lan-none") as ep, Bus("web", ep) as bus:
         svc = service.build(bus, args(tmp_path, host="127.0.0.1"))
         try:
-            client = TestClient(svc.app)
+            client = TestClient(svc.app, base_url="http://127.0.0.1:8080")
             how = client.get("/api/phone").json()
             assert how == {"lan": False, "urls": [], "text": how["text"]} and "--lan" in how["text"]
             refused = client.get("/api/phone/qr.png")

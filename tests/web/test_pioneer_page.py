@@ -118,17 +118,7 @@ def apartment_json(apartment, path: str) -> dict:
 
 
 def _post(apartment, path: str, body: object) -> tuple[int, dict]:
-    import json
-    import urllib.error
-    import urllib.request
-    data = body if isinstance(body, bytes) else json.dumps(body).encode()
-    req = urllib.request.Request(apartment.web_url.rstrip("/") + path, data=data,
-                                 headers={"Content-Type": "application/json"}, method="POST")
-    try:
-        with urllib.request.urlopen(req, timeout=10) as reply:
-            return reply.status, json.load(reply)
-    except urllib.error.HTTPError as exc:
-        return exc.code, json.load(exc)
+    return apartment.web("POST", path, body)
 
 
 @pytest.mark.parametrize("path, body, status, words", [

@@ -87,7 +87,7 @@ def test_a_bad_reading_gets_a_sentence_naming_the_field(message, words):
 def socket(web):
     client, svc, driver, server = web
     settle(web)
-    with client.websocket_connect("/ws") as ws:
+    with client.websocket_connect(f"ws://127.0.0.1:8080/ws?session={svc.web.session}") as ws:
         yield ws, svc, driver, server
     server.ctl.stop()
 

@@ -44,11 +44,9 @@ def spoken(folder: Path, text: str) -> Path:
 
 
 def http(stack, method: str, path: str, body: dict | None = None) -> dict:
-    req = urllib.request.Request(stack.web_url.rstrip("/") + path, method=method,
-                                 data=None if body is None else json.dumps(body).encode(),
-                                 headers={"Content-Type": "application/json"})
-    with urllib.request.urlopen(req, timeout=10) as reply:
-        return json.load(reply)
+    status, answer = stack.web(method, path, body)
+    assert status < 400, f"{method} {path}: {status} {answer}"
+    return answer
 
 
 @pytest.fixture(scope="module")

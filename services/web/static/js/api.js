@@ -3,8 +3,13 @@
 
 export class Refused extends Error {}
 
+// The server writes its session token into the page; another site's page cannot read it, so
+// it cannot send it (services/web/guard.py). A page from before a server restart reloads.
+const SESSION = document.querySelector('meta[name=asibot-session]')?.content || '';
+const SESSION_REFUSED = 4403;
+
 async function request(method, path, body) {
-  const init = { method, headers: {} };
+  const init = { method, headers: { 'X-Asibot-Session': SESSION } };
   if (body instanceof FormData) {
     init.body = body;
   } else if (body !== undefined) {
@@ -57,11 +62,12 @@ export function onMessage(fn) { messageListeners.add(fn); return () => messageLi
 
 let socket = null;
 export function connectFeed() {
-  const url = `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/ws`;
+  const url = `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/ws?session=${SESSION}`;
   socket = new WebSocket(url);
   socket.onopen = () => { state.feed = 'live'; changed('feed'); };
-  socket.onclose = () => {
+  socket.onclose = (event) => {
     state.feed = 'lost'; changed('feed');
+    if (event.code === SESSION_REFUSED) { location.reload(); return; }   // the server restarted
     setTimeout(connectFeed, 1000);   // the server restarted or the network blinked: come back
   };
   socket.onmessage = (event) => {
