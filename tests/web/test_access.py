@@ -13,7 +13,6 @@ from __future__ import annotations
 import json
 import math
 import time
-import urllib.request
 
 import pytest
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 import contextlib
 import json
 import subprocess
-import urllib.request
 import wave
 from pathlib import Path
 
