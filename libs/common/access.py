@@ -8,8 +8,11 @@ key catalogue (`asibot.keys`), so no key is spelled by hand twice:
 
 - `driver` (arm and base drivers, the simulator, perception) publishes robot state;
 - `controller` (kinematics, nav) publishes commands and holds robots;
-- `operator` (web page, AsTeRICS bridge, voice, the `asibot` command, user programs) engages
-  and releases the estop and calls every RPC;
+- `operator` (web page, AsTeRICS bridge, voice, the `asibot` command, `asibot.client` run by
+  hand) engages and releases the estop and calls every RPC;
+- `program` (a user's program run by the web page's runner, asibot.web.sandbox) calls the
+  kinematics and nav verbs of `asibot.client` and reads; it publishes no command, never
+  touches the estop and serves nothing, so a program cannot bypass kinematics or nav;
 - `reader` (user `anonymous`, password `anonymous`, public on purpose) reads everything
   and moves nothing.
 
@@ -37,7 +40,7 @@ from asibot import certificates, keys
 
 ACCESS_ENV = "ASIBOT_ACCESS"
 ROLE_ENV = "ASIBOT_ROLE"
-ROLES = ("driver", "controller", "operator", "reader")
+ROLES = ("driver", "controller", "operator", "program", "reader")
 ANONYMOUS = ("anonymous", "anonymous")   # the reader's login: public, it moves nothing
 DICTIONARY = "router.passwords"
 
@@ -101,8 +104,19 @@ _OPERATOR = [
     (("query",), _robots(keys.cart_rpc, keys.nav_rpc, keys.driver_rpc, keys.perception_rpc,
                          names=("*",)) + _SERVED_BY_OPERATORS),
 ]
+#: The verbs `asibot.client` calls (CartesianClient, NavClient): what a user's program needs.
+#: Not `pointer` (the page's handheld pointer), not nav's settings, maps on disk or localize.
+PROGRAM_CART_VERBS = ("stat", "inv", "fwd", "movj", "movl", "movv", "movjv", "relj", "stop", "wait",
+                      "tool", "act", "home")
+PROGRAM_NAV_VERBS = ("goto", "cancel", "result", "status", "places", "save_place", "rename_place",
+                     "remove_place", "drive", "turn", "primitive", "set_pose", "map_start", "map_stop",
+                     "map_save")
+_PROGRAM = [
+    (("query",), _robots(*(lambda r, v=v: keys.cart_rpc(r, v) for v in PROGRAM_CART_VERBS))
+     + _robots(*(lambda r, v=v: keys.nav_rpc(r, v) for v in PROGRAM_NAV_VERBS))),
+]
 _GRANTS = {"reader": _READ, "driver": _READ + _DRIVER, "controller": _READ + _CONTROLLER,
-           "operator": _READ + _OPERATOR}
+           "operator": _READ + _OPERATOR, "program": _READ + _PROGRAM}
 _EVERY_MESSAGE = ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply",
                   "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"]
 
@@ -169,6 +183,19 @@ def ensure_credentials(folder: Path | str | None = None) -> Path:
             _write_private(folder / f"{role}.credentials", f"{username(role)}:{password}\n")
         lines = [f"{username(r)}:{p}" for r, p in logins.items()] + [":".join(ANONYMOUS)]
         _write_private(dictionary, "\n".join(lines) + "\n")
+    else:
+        # A folder from before a role existed (`program`) gets it; the router reads its
+        # dictionary when it starts, so restart it.
+        users = {line.partition(":")[0] for line in dictionary.read_text().splitlines()}
+        for role in ROLES:
+            if role != "reader" and username(role) not in users:
+                password = secrets.token_urlsafe(24)
+                if not (folder / f"{role}.credentials").exists():
+                    _write_private(folder / f"{role}.credentials", f"{username(role)}:{password}\n")
+                else:
+                    password = (folder / f"{role}.credentials").read_text().strip().partition(":")[2]
+                with open(dictionary, "a") as f:
+                    f.write(f"{username(role)}:{password}\n")
     certificates.ensure_router_certificate(folder)   # for tls/: logins cross a network encrypted
     return folder
 
@@ -249,7 +276,8 @@ def refusal(bus_name: str, message: str, key: str) -> str | None:
     role = "reader" if found.user == ANONYMOUS[0] else role_of(bus_name)
     if may(role, message, key):
         return None
-    able = [r for r in ROLES if may(r, message, key)]
+    # `program` is the runner's to give, not a role to run something with by hand.
+    able = [r for r in ROLES if r != "program" and may(r, message, key)]
     if able:
         how = (f"only {' or '.join(_a(r) for r in able)} may: run it with {ROLE_ENV}={able[0]} and "
                f"{default_folder() / (able[0] + '.credentials')} in place")

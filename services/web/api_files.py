@@ -13,7 +13,7 @@ from typing import Annotated, Literal
 
 from fastapi import APIRouter, File, Request, Response, UploadFile
 from fastapi.responses import FileResponse
-from pydantic import BaseModel, ConfigDict, Field, StrictStr
+from pydantic import BaseModel, ConfigDict, Field, StrictInt, StrictStr
 
 from asibot.errors import RpcError
 from asibot.web.api_robots import Level, Number, RobotId, _known, _web
@@ -54,6 +54,10 @@ class ProgramText(Strict):
 
 class Run(Strict):
     robot: RobotId
+
+
+class RunProgram(Run):
+    minutes: Annotated[StrictInt, Field(ge=1, le=240, description="the run's time limit (default 10 minutes)")] | None = None
 
 
 class Word(Strict):
@@ -170,19 +174,19 @@ def restore(name: str, version: str, request: Request) -> dict:
 
 
 # --- running -----------------------------------------------------------------------------------
-def _start(web, program: str, robot: str) -> dict:
+def _start(web, program: str, robot: str, minutes: int | None = None) -> dict:
     _known(web, robot)
     path = web.data.program_file(program)
     try:
-        web.runner.start(path, robot, name=program)
+        web.runner.start(path, robot, name=program, wall_seconds=None if minutes is None else minutes * 60.0)
     except RuntimeError as exc:
         raise RpcError("busy", str(exc)) from None
     return web.runner.status()
 
 
 @router.post("/programs/{name}/run", summary="run a program on a robot, in its own process")
-def run_program(name: str, body: Run, request: Request) -> dict:
-    return _start(_web(request), name, body.robot)
+def run_program(name: str, body: RunProgram, request: Request) -> dict:
+    return _start(_web(request), name, body.robot, body.minutes)
 
 
 @router.post("/run/stop", summary="stop the running program (and the arm)")

@@ -1,9 +1,12 @@
 """Runs a user's Python program (from the Program tab) in its own process, with limits.
 
 A user's program is untrusted in the everyday sense: it may loop forever, allocate without
-bound, crash, or leave child processes behind. So it never runs inside the web server: it gets
-its own process in its own session (Stop kills the whole process group), CPU and memory limits
-set in the child before `exec`, no shell, no stdin. Its output comes back line by line, capped,
+bound, crash, or leave child processes behind, and in the plain sense too: it is text from a
+web page, on a robot PC where the server is root and holds every bus password. So it never
+runs inside the web server: it runs in a sandbox (asibot.web.sandbox: its own pid namespace
+and cgroup, an unprivileged user, a read-only machine, no listening sockets, its own bus
+login) with CPU, memory, process and wall-clock limits, no shell, no stdin. Stop kills every
+process it started at once, however it detached. Its output comes back line by line, capped,
 and whenever it ends for any reason but a clean exit the arm is told to stop (`stop_robot`),
 because a program that dies mid-motion must not leave the arm moving. The page gets a sentence
 saying why it ended.
@@ -14,6 +17,7 @@ Plain Python on purpose: the server wires the callbacks to its WebSocket and to 
 from __future__ import annotations
 
 import collections
+import concurrent.futures
 import dataclasses
 import logging
 import os
@@ -28,12 +32,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any, Callable
 
+from asibot.web.sandbox import Prepared, Sandbox, exit_code
+
 log = logging.getLogger(__name__)
 
 #: stderr lines kept to explain the end (a traceback's last frames and message fit easily).
 STDERR_TAIL = 200
-#: How long Stop waits for SIGTERM to work before SIGKILL, s.
+#: How long Stop waits for the fallback supervisor (no pid namespace, no cgroup) to end the
+#: program's processes before it kills the group itself, s. Everywhere else Stop is SIGKILL.
 TERM_GRACE = 1.0
+#: How long ending a run may take before the runner says processes are left, s.
+GONE_TIMEOUT = 5.0
 #: Marks a line cut at max_line_chars.
 CUT_MARK = " [line cut]"
 #: Text in the stderr tail that says the program ran out of memory (Python, C++, OpenBLAS...).
@@ -55,9 +64,19 @@ class Limits:
     # limit that is tight on a bigger machine would hang programs at start. RLIMIT_DATA (Linux
     # >= 4.7: heap plus private writable mappings, i.e. memory the program can actually fill)
     # counts what a program allocates, and 1 GiB leaves ~900 MiB for the program itself.
+    # Also the memory cgroup's limit for the whole sandbox when the machine has one: it counts
+    # what RLIMIT_DATA does not (shared mappings, tmpfs, every process of the program).
     memory_bytes: int = 1 << 30
     max_output_lines: int = 2000
     max_line_chars: int = 2000
+    # Wall-clock time: a program asleep or waiting on the bus uses no CPU and would run for ever.
+    wall_seconds: float = 600.0
+    # Processes *and threads* of the whole sandbox (the pids cgroup counts tasks): a Zenoh
+    # client with numpy has ~20 threads on 2 cores (numpy starts one per core), so 128 plus
+    # one per core leaves room, and a fork bomb stops well short of hurting the server.
+    max_tasks: int = 128 + (os.cpu_count() or 1)
+    # The program's scratch folder (/tmp, also $HOME): a tmpfs, gone when the run ends.
+    scratch_bytes: int = 64 << 20
 
 
 @dataclass
@@ -85,8 +104,10 @@ class ProgramRunner:
                  env: dict[str, str] | None = None,
                  on_output: Callable[[str, str], None] | None = None,
                  on_exit: Callable[[RunResult], None] | None = None,
-                 stop_robot: Callable[[str], None] | None = None) -> None:
+                 stop_robot: Callable[[str], None] | None = None,
+                 *, sandbox: Sandbox | None = None) -> None:
         self.python = python
+        self.sandbox = sandbox if sandbox is not None else Sandbox()
         self.limits = limits or Limits()
         self.env = dict(env or {})
         self.on_output = on_output
@@ -97,6 +118,12 @@ class ProgramRunner:
         self._output_lock = threading.Lock()  # one on_output at a time, ring in call order
         self._ring: collections.deque[tuple[str, str]] = collections.deque(maxlen=self.limits.max_output_lines)
         self._proc: subprocess.Popen[bytes] | None = None
+        self._run: Prepared | None = None
+        self._timer: threading.Timer | None = None
+        # One long-lived thread forks every program: bubblewrap's --die-with-parent is the
+        # *thread* that forked it (PR_SET_PDEATHSIG), and a request thread that ends would
+        # take the program with it.
+        self._spawner = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="runner-spawn")
         self._waiter: threading.Thread | None = None
         self._reaped = threading.Event()
         self._done = threading.Event()
@@ -109,24 +136,40 @@ class ProgramRunner:
 
     # -- control ---------------------------------------------------------------------------
 
-    def start(self, path: Path, robot: str, *, name: str | None = None) -> None:
-        """Run `python -u path robot` in the program's folder; returns once it has started."""
+    def start(self, path: Path, robot: str, *, name: str | None = None,
+              wall_seconds: float | None = None) -> None:
+        """Run `python -u path robot` in the program's folder; returns once it has started.
+
+        `wall_seconds` replaces the limits' wall-clock time for this run (the page's choice).
+        """
         path = Path(path).resolve()
         if not path.is_file():
             raise FileNotFoundError(f"there is no program file {path.name!r}")
         limits = self.limits
+        if wall_seconds is not None:
+            if not wall_seconds > 0:
+                raise ValueError(f"the time limit must be more than 0 s, got {wall_seconds}")
+            limits = dataclasses.replace(limits, wall_seconds=float(wall_seconds))
         with self._lock:
             if not self._done.is_set():
                 raise RuntimeError(f"{self._program!r} is still running; stop it first")
-            env = {**os.environ, **self.env, "ASIBOT_ROBOT": robot, "PYTHONUNBUFFERED": "1"}
-            proc = subprocess.Popen(
-                [self.python, "-u", str(path), robot],  # a list: no shell ever sees user input
-                cwd=path.parent, env=env,
-                stdin=subprocess.DEVNULL,  # input() gets EOF instead of blocking forever
-                stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                start_new_session=True,    # its own process group, so Stop reaches its children
-                preexec_fn=_limiter(limits))
-            self._proc = proc
+            run = self.sandbox.prepare(self.python, path, robot, self.env,
+                                       memory_bytes=limits.memory_bytes, max_tasks=limits.max_tasks,
+                                       scratch_bytes=limits.scratch_bytes, rlimits=_limiter(limits))
+            try:
+                proc = self._spawner.submit(
+                    subprocess.Popen,
+                    run.argv,  # a list: no shell ever sees user input
+                    cwd=run.cwd, env=run.env, pass_fds=run.pass_fds,
+                    stdin=subprocess.DEVNULL,  # input() gets EOF instead of blocking forever
+                    stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                    start_new_session=True,    # its own process group, apart from the server's
+                    preexec_fn=run.preexec).result()
+                run.started()
+            except BaseException:
+                run.close()
+                raise
+            self._proc, self._run = proc, run
             self._program = name or path.stem
             self._robot = robot
             self._started = time.time()
@@ -141,29 +184,44 @@ class ProgramRunner:
                                         name=f"runner-err-{proc.pid}", daemon=True)]
             for reader in readers:
                 reader.start()
-            self._waiter = threading.Thread(target=self._wait, args=(proc, path, limits, readers, tail),
+            self._waiter = threading.Thread(target=self._wait, args=(proc, run, limits, readers, tail),
                                             name=f"runner-wait-{proc.pid}", daemon=True)
             self._waiter.start()
+            self._timer = threading.Timer(limits.wall_seconds, self._out_of_time, args=(proc, limits))
+            self._timer.daemon = True
+            self._timer.start()
+
+    def _out_of_time(self, proc: subprocess.Popen[bytes], limits: Limits) -> None:
+        with self._lock:
+            if self._proc is not proc or self._done.is_set():
+                return
+        self.stop(f"stopped: it ran longer than its time limit of {_duration(limits.wall_seconds)}")
 
     def stop(self, reason: str = "stopped by the user") -> None:
-        """Stop the running program and every process of its group; returns once it is gone.
+        """Stop the running program and every process it started; returns once all are gone.
 
-        SIGTERM first so a program can clean up, SIGKILL after TERM_GRACE. Idempotent.
+        SIGKILL at once, to every process of its pid namespace and cgroup: a program that
+        setsid()s or double-forks leaves its process group, not those. No SIGTERM first: the
+        arm must stop now, and a cleanup that ran on would be a program running after Stop.
+        Idempotent.
         """
         with self._lock:
-            proc, waiter = self._proc, self._waiter
-            if proc is None or self._done.is_set():
+            proc, run, waiter = self._proc, self._run, self._waiter
+            if proc is None or run is None or self._done.is_set():
                 return
             if self._stop_reason is None:
                 self._stop_reason = reason
-        self._signal(proc, signal.SIGTERM)
-        if not self._reaped.wait(TERM_GRACE):
-            self._signal(proc, signal.SIGKILL)
-            self._reaped.wait()
-        # The waiter tells the robot to stop and records the result; wait for that too, unless
-        # stop() is called from a callback on the waiter itself.
+        if run.supervised:   # only a supervisor knows the descendants that left the group
+            self._signal(proc, signal.SIGTERM, group=False)
+            if self._reaped.wait(TERM_GRACE):
+                run = None
+        if run is not None:
+            self._kill(proc, run)
+        self._reaped.wait()
+        # The waiter makes sure all are gone, tells the robot to stop and records the result;
+        # wait for that too, unless stop() is called from a callback on the waiter itself.
         if waiter is not None and waiter is not threading.current_thread():
-            waiter.join(timeout=5.0)
+            waiter.join(timeout=GONE_TIMEOUT + 5.0)
 
     def close(self) -> None:
         """Stop a running program (the server is going away)."""
@@ -219,30 +277,40 @@ class ProgramRunner:
         finally:
             stream.close()
 
-    def _wait(self, proc: subprocess.Popen[bytes], path: Path, limits: Limits,
+    def _wait(self, proc: subprocess.Popen[bytes], run: Prepared, limits: Limits,
               readers: list[threading.Thread], tail: collections.deque[str]) -> None:
         pid = proc.pid
         os.waitid(os.P_PID, pid, os.WEXITED | os.WNOWAIT)
         # The exited leader is a zombie until reaped, which keeps its process group id ours:
-        # kill whatever it left in the group now, so no orphan keeps moving the arm.
+        # kill whatever it left now, in the group, the namespace and the cgroup, so no orphan
+        # keeps moving the arm.
+        self._kill(proc, run)
         with self._signal_lock:
-            _killpg(pid, signal.SIGKILL)
             try:
                 _, status, usage = os.wait4(pid, 0)
-                code: int | None = os.waitstatus_to_exitcode(status)
+                code: int | None = exit_code(os.waitstatus_to_exitcode(status), run)
                 cpu = usage.ru_utime + usage.ru_stime
             except ChildProcessError:  # someone else reaped it; we know less
                 code, cpu = None, 0.0
             proc.returncode = code if code is not None else -1  # Popen must not wait on the pid again
             self._reaped.set()
+        if not run.wait_gone(GONE_TIMEOUT):
+            log.error("processes of the program %r were still running %.0f s after it ended: %s",
+                      self._program, GONE_TIMEOUT, run.cgroups.pids_inside() if run.cgroups else "?")
+        if self._timer is not None:
+            self._timer.cancel()
         with self._lock:
             stop_reason = self._stop_reason
         if stop_reason is not None or code != 0:
             # First thing after it died: a crash mid-motion must not leave the arm moving.
             _call(self.stop_robot, self._robot)
+        oom = bool(run.cgroups and run.cgroups.counter("memory.events", "oom_kill"))
+        crowded = bool(run.cgroups and run.cgroups.counter("pids.events", "max"))
+        run.close()
         for reader in readers:
-            reader.join(timeout=2.0)  # a descendant that left the group may hold the pipe open
-        reason, ok = explain(code, cpu, list(tail), path, limits, stop_reason)
+            reader.join(timeout=2.0)
+        reason, ok = explain(code, cpu, list(tail), run.program, limits, stop_reason,
+                             out_of_memory=oom, out_of_tasks=crowded)
         result = RunResult(program=self._program, robot=self._robot, started=self._started,
                            ended=time.time(), exit_code=code, reason=reason, ok=ok)
         with self._lock:
@@ -250,23 +318,39 @@ class ProgramRunner:
             self._done.set()
         _call(self.on_exit, result)
 
-    def _signal(self, proc: subprocess.Popen[bytes], sig: int) -> None:
+    def _kill(self, proc: subprocess.Popen[bytes], run: Prepared) -> None:
+        """SIGKILL the run's group, namespace and cgroup (the last two are reuse-safe)."""
+        run.kill()
+        self._signal(proc, signal.SIGKILL)
+
+    def _signal(self, proc: subprocess.Popen[bytes], sig: int, group: bool = True) -> None:
         with self._signal_lock:
             if not self._reaped.is_set():
-                _killpg(proc.pid, sig)
+                if group:
+                    _killpg(proc.pid, sig)
+                else:
+                    try:
+                        os.kill(proc.pid, sig)
+                    except ProcessLookupError:
+                        pass
 
 
 def explain(code: int | None, cpu_seconds: float, stderr_tail: list[str], path: Path,
-            limits: Limits, stop_reason: str | None = None) -> tuple[str, bool]:
-    """Why a run ended, as (sentence for the user, ok)."""
+            limits: Limits, stop_reason: str | None = None, *, out_of_memory: bool = False,
+            out_of_tasks: bool = False) -> tuple[str, bool]:
+    """Why a run ended, as (sentence for the user, ok). `out_of_memory`/`out_of_tasks`: its
+    cgroup saw the OOM killer / a refused fork or thread."""
     if stop_reason is not None:
         return stop_reason, False
     if code == -signal.SIGXCPU or (code == -signal.SIGKILL and cpu_seconds >= limits.cpu_seconds):
         return f"stopped: it used all of its {limits.cpu_seconds} s of CPU time", False
     text = "\n".join(stderr_tail)
     # A SIGKILL that neither we nor the CPU limit sent is, on a robot PC, the kernel's OOM killer.
-    if code != 0 and (code == -signal.SIGKILL or any(m in text for m in _MEMORY_MARKERS)):
+    if code != 0 and (out_of_memory or code == -signal.SIGKILL or any(m in text for m in _MEMORY_MARKERS)):
         return f"stopped: it needed more memory than its limit of {limits.memory_bytes // 2**20} MiB", False
+    if code != 0 and out_of_tasks:
+        return (f"stopped: it started more processes and threads than its limit of {limits.max_tasks}",
+                False)
     if code == 0:
         return "finished", True
     error = _traceback_error(stderr_tail, path)
@@ -313,6 +397,12 @@ def _limiter(limits: Limits) -> Callable[[], None]:
         resource.setrlimit(resource.RLIMIT_DATA, memory)
         resource.setrlimit(resource.RLIMIT_CORE, (0, 0))  # no core files of user programs on disk
     return apply
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:g} s"
+    return f"{seconds / 60:g} min" if seconds < 7200 else f"{seconds / 3600:g} h"
 
 
 def _killpg(pgid: int, sig: int) -> None:

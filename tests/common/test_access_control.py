@@ -70,18 +70,19 @@ def test_credentials_are_private_and_made_once(tmp_path):
     assert stat.S_IMODE(folder.stat().st_mode) == 0o700
     files = sorted(p.name for p in folder.iterdir())
     assert files == ["ca.key", "ca.pem", "controller.credentials", "driver.credentials",
-                     "operator.credentials", "router.key", access.DICTIONARY, "router.pem"]
+                     "operator.credentials", "program.credentials", "router.key", access.DICTIONARY,
+                     "router.pem"]
     # Every file is private but the CA's certificate, which every client gets (test_router_tls).
     assert all(stat.S_IMODE(p.stat().st_mode) == 0o600 for p in folder.iterdir() if p.name != "ca.pem")
     before = {p.name: p.read_text() for p in folder.iterdir()}
     access.ensure_credentials(folder)
     assert {p.name: p.read_text() for p in folder.iterdir()} == before
     dictionary = before[access.DICTIONARY].splitlines()
-    for role in ("driver", "controller", "operator"):
+    for role in ("driver", "controller", "operator", "program"):
         assert before[f"{role}.credentials"].strip() in dictionary
     assert "anonymous:anonymous" in dictionary
     passwords = [line.split(":", 1)[1] for line in dictionary if not line.startswith("anonymous")]
-    assert len(set(passwords)) == 3 and all(len(p) >= 24 for p in passwords)
+    assert len(set(passwords)) == 4 and all(len(p) >= 24 for p in passwords)
 
 
 def test_roles_come_from_the_bus_name_unless_set(monkeypatch, tmp_path):

@@ -127,3 +127,22 @@ def test_true_is_not_a_number_for_a_held_jog_button(web, field):
     assert message["code"] == "bad_request" and "True" in message["text"]
     for command in list(driver.commands)[commands:]:          # at most the stop of a closed page: a hold
         assert not any(command.velocities) and command.values == pytest.approx(list(driver.commands)[commands - 1].values)
+
+
+@pytest.mark.parametrize("minutes", [0, 241, True, 1.5, "10"])
+def test_a_run_time_limit_is_a_whole_number_of_minutes(web, minutes):
+    client, svc, driver, server = web
+    client.post("/api/programs", json={"name": "limited"})
+    reply = client.post("/api/programs/limited/run", json={"robot": API_ROBOT, "minutes": minutes})
+    assert reply.status_code == 422 and "minutes" in reply.json()["message"]
+    assert not svc.web.runner.running()
+
+
+def test_the_time_limit_chosen_on_the_page_is_the_runs_limit(web, monkeypatch):
+    client, svc, driver, server = web
+    seen = {}
+    monkeypatch.setattr(svc.web.runner, "start", lambda path, robot, name=None, wall_seconds=None:
+                        seen.update(name=name, wall_seconds=wall_seconds))
+    client.post("/api/programs", json={"name": "limited"})
+    assert client.post("/api/programs/limited/run", json={"robot": API_ROBOT, "minutes": 2}).status_code == 200
+    assert seen == {"name": "limited", "wall_seconds": 120.0}

@@ -159,8 +159,10 @@ export default {
     const run = () => current && attempt(async () => {
       if (text() !== saved) await save();
       output.clear();
-      return api.post(`/api/programs/${encodeURIComponent(current)}/run`, { robot: state.chosen });
+      return api.post(`/api/programs/${encodeURIComponent(current)}/run`, { robot: state.chosen, minutes: Number(minutes.value) });
     }, `Running ${current}.`);
+    // A program that waits for ever is stopped at its time limit (the server's sandbox).
+    const minutes = el('input', { type: 'number', id: 'run-minutes', min: '1', max: '240', value: '10', class: 'narrow' });
 
     root.replaceChildren(el('div', { class: 'columns' },
       el('div', {},
@@ -169,7 +171,8 @@ export default {
           el('div', { class: 'row' }, newName, el('button', { type: 'button', class: 'primary', onclick: create }, 'New program'))),
         el('section', { class: 'panel', 'aria-label': 'Run' },
           el('h2', {}, 'Run'),
-          el('div', { class: 'row' }, el('button', { type: 'button', class: 'primary big', onclick: run }, 'Run'), stopProgramButton()),
+          el('div', { class: 'row' }, el('button', { type: 'button', class: 'primary big', onclick: run }, 'Run'), stopProgramButton(),
+            el('label', { for: 'run-minutes' }, 'Time limit, minutes'), minutes),
           output.node)),
       el('section', { class: 'panel', 'aria-label': 'Editor' },
         title,

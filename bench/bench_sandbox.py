@@ -1,0 +1,206 @@
+"""Benchmark of the user-program sandbox (asibot.web.sandbox) against the plain subprocess the
+runner used before it:
+
+1. start to first output: `ProgramRunner.start()` to the program's first line, for a program
+   that prints at once and for one that first imports `asibot.client` (what a real program
+   does), in the full sandbox (bubblewrap, cgroups, Landlock), with cgroups only, with the
+   supervisor only (a machine with neither), beside a plain `subprocess.Popen` with the old
+   rlimits and its own session (the reference).
+2. Stop to all gone: a program whose children left its process group (one `setsid()`, one
+   double-forked daemon), from `stop()` to the moment no process with the run's marker is
+   left (`stop()` returns then); the budget is 100 ms. The plain subprocess's figure is its
+   process-group kill, after which the escaped children are still running (counted).
+
+    python bench/bench_sandbox.py [--runs N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import uuid
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from table import print_table  # noqa: E402  bench/table.py: run as `python bench/<name>.py`
+
+from asibot.web.runner import Limits, ProgramRunner, _limiter  # noqa: E402
+from asibot.web.sandbox import Sandbox  # noqa: E402
+
+MODES = {"sandbox": {}, "cgroups only": {"bwrap": False}, "supervisor only": {"bwrap": False, "cgroups": False}}
+PROGRAMS = {"print": "print('up', flush=True)\n",
+            "import asibot.client": "import asibot.client\nprint('up', flush=True)\n"}
+ESCAPE = """
+import os, subprocess, sys, time
+M = "{marker}"
+subprocess.Popen([sys.executable, "-c", "import os, time; os.setsid(); time.sleep(60)", M])
+pid = os.fork()
+if pid == 0:
+    os.setsid()
+    if os.fork() == 0:
+        os.execv(sys.executable, [sys.executable, "-c", "import time; time.sleep(60)", M])
+    os._exit(0)
+os.waitpid(pid, 0)
+def running():
+    n = 0
+    for p in os.listdir("/proc"):
+        try:
+            with open(f"/proc/{{p}}/cmdline", "rb") as f:
+                n += M.encode() in f.read()
+        except OSError:
+            pass
+    return n
+while running() < 2:
+    time.sleep(0.01)
+print("both up", flush=True)
+time.sleep(60)
+"""
+
+
+def marked(marker: str) -> list[int]:
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                if marker.encode() in (entry / "cmdline").read_bytes():
+                    state = (entry / "stat").read_text().rsplit(")", 1)[1].split()[0]
+                    if state not in ("Z", "X"):
+                        found.append(int(entry.name))
+            except OSError:
+                pass
+    return found
+
+
+class FirstLine:
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self.at = 0.0
+
+    def __call__(self, stream: str, line: str) -> None:
+        if stream == "out" and not self.event.is_set():
+            self.at = time.perf_counter()
+            self.event.set()
+
+
+def start_to_output(mode: dict, text: str, folder: Path, runs: int) -> list[float]:
+    path = folder / "prog.py"
+    path.write_text(text)
+    seen = FirstLine()
+    runner = ProgramRunner(on_output=seen, env={"ASIBOT_ROUTER": "tcp/127.0.0.1:7447"}, sandbox=Sandbox(**mode))
+    out = []
+    try:
+        for _ in range(runs + 1):   # the first is a warm-up
+            seen.event.clear()
+            t = time.perf_counter()
+            runner.start(path, "bench")
+            seen.event.wait(30)
+            out.append(seen.at - t)
+            while runner.running():
+                time.sleep(0.005)
+    finally:
+        runner.close()
+    return out[1:]
+
+
+def plain_start_to_output(text: str, folder: Path, runs: int) -> list[float]:
+    """The runner before the sandbox: Popen with rlimits in preexec_fn and a session of its own."""
+    path = folder / "plain.py"
+    path.write_text(text)
+    out = []
+    for _ in range(runs + 1):
+        t = time.perf_counter()
+        proc = subprocess.Popen([sys.executable, "-u", str(path), "bench"], cwd=folder,
+                                env={**os.environ, "ASIBOT_ROBOT": "bench"}, stdin=subprocess.DEVNULL,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True,
+                                preexec_fn=_limiter(Limits()))
+        proc.stdout.readline()
+        out.append(time.perf_counter() - t)
+        proc.communicate()
+    return out[1:]
+
+
+def stop_to_gone(mode: dict, folder: Path, runs: int) -> tuple[list[float], int]:
+    times, left = [], 0
+    seen = []
+    runner = ProgramRunner(on_output=lambda s, line: seen.append(line), sandbox=Sandbox(**mode))
+    try:
+        for _ in range(runs):
+            marker = f"bench-escape-{uuid.uuid4().hex}"
+            path = folder / "escape.py"
+            path.write_text(ESCAPE.format(marker=marker))
+            seen.clear()
+            runner.start(path, "bench")
+            deadline = time.monotonic() + 30
+            while "both up" not in seen and time.monotonic() < deadline:
+                time.sleep(0.005)
+            t = time.perf_counter()
+            runner.stop()
+            while marked(marker) and time.perf_counter() - t < 10:
+                time.sleep(0.0005)
+            times.append(time.perf_counter() - t)
+            left += len(marked(marker))
+    finally:
+        runner.close()
+    return times, left
+
+
+def plain_stop(folder: Path, runs: int) -> tuple[list[float], int]:
+    times, left = [], 0
+    for _ in range(runs):
+        marker = f"bench-escape-{uuid.uuid4().hex}"
+        path = folder / "escape.py"
+        path.write_text(ESCAPE.format(marker=marker))
+        proc = subprocess.Popen([sys.executable, "-u", str(path)], cwd=folder, stdout=subprocess.PIPE,
+                                start_new_session=True)
+        proc.stdout.readline()
+        t = time.perf_counter()
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        times.append(time.perf_counter() - t)
+        survivors = marked(marker)
+        left += len(survivors)
+        for pid in survivors:
+            os.kill(pid, signal.SIGKILL)
+    return times, left
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=10)
+    args = parser.parse_args()
+    logging.getLogger("asibot.web.sandbox").setLevel(logging.ERROR)   # each mode's "missing" line
+    print("#", Sandbox().describe())
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        for name, text in PROGRAMS.items():
+            plain = plain_start_to_output(text, folder, args.runs)
+            rows.append((f"start to first output, {name}: plain subprocess (reference)",
+                         f"{statistics.median(plain) * 1e3:.1f} / {max(plain) * 1e3:.1f}", "ms p50/max", ""))
+            for mode, kwargs in MODES.items():
+                t = start_to_output(kwargs, text, folder, args.runs)
+                rows.append((f"start to first output, {name}: {mode}",
+                             f"{statistics.median(t) * 1e3:.1f} / {max(t) * 1e3:.1f}", "ms p50/max", ""))
+        t, left = plain_stop(folder, args.runs)
+        rows.append(("Stop to all gone, escaped children: plain process-group kill (reference)",
+                     f"{statistics.median(t) * 1e3:.1f} / {max(t) * 1e3:.1f}", "ms p50/max",
+                     f"{left} of {2 * args.runs} escaped children still running"))
+        for mode, kwargs in MODES.items():
+            t, left = stop_to_gone(kwargs, folder, args.runs)
+            rows.append((f"Stop to all gone, escaped children: {mode}",
+                         f"{statistics.median(t) * 1e3:.1f} / {max(t) * 1e3:.1f}", "ms p50/max",
+                         f"100 ms; {left} left"))
+    print_table(rows)
+
+
+if __name__ == "__main__":
+    main()
