@@ -160,7 +160,7 @@ def main() -> None:
     bus, svc_bus = Bus("bench", endpoint), Bus("asterics_bridge", endpoint)
     FakeNav(bus, ROBOT)
     dispatcher = Dispatcher(svc_bus, ROBOT)
-    servers = Servers(dispatcher, tcp_port=0, http_port=None, limits=Limits()).start()
+    servers = Servers(dispatcher, tcp_port=0, http_port=None, limits=Limits(per_address=Limits.max_clients)).start()
     try:
         bridge, rpc = command_to_cmd_vel(bus, servers.tcp_port, n)
         frame, sub = event_to_frame(bus, servers.tcp_port, n)

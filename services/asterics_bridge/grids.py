@@ -8,6 +8,10 @@ the arm. Every button is an HTTP action (POST text/plain to the bridge's /comman
 holds two live elements that poll GET /status (the robot's state, the last event) and buttons
 to the other keyboards. tests/asterics_bridge/test_setups.py checks the file is this output
 and that its fields are AsTeRICS-Grid's.
+
+The shipped file has no token (it cannot know the user's); the bridge writes the user's copy
+with its address and token in every HTTP action (`text(url, token)`, asibot.asterics_bridge.http_token):
+AsTeRICS-Grid sends `authUser`/`authPw` as Basic auth, and the bridge takes the token as the password.
 """
 
 from __future__ import annotations
@@ -19,6 +23,8 @@ from asibot.asterics_bridge.servers import DEFAULT_HTTP_PORT
 
 MODEL_VERSION = '{"major": 6, "minor": 0, "patch": 0}'
 URL = f"http://127.0.0.1:{DEFAULT_HTTP_PORT}"
+#: The user name of the Basic auth the user's grids send (the bridge reads only the password).
+AUTH_USER = "asibot"
 PLACES = ("fridge", "shelf", "desk", "charging station")
 COLUMNS = 5
 STOP_COLOUR, MOVE_COLOUR, SETTING_COLOUR, NAV_COLOUR = "#e53935", "#90caf9", "#fff59d", "#c5e1a5"
@@ -62,10 +68,15 @@ def _label(text: str) -> dict:
     return {"en": text}
 
 
-def http_action(element_id: str, body: str) -> dict:
+def _auth(token: str | None) -> dict:
+    """AsTeRICS-Grid's Basic auth fields carrying the bridge's token (none: no fields)."""
+    return {"authUser": AUTH_USER, "authPw": token} if token else {}
+
+
+def http_action(element_id: str, body: str, url: str = URL, token: str | None = None) -> dict:
     return {"id": f"{element_id}-http", "modelName": "GridActionHTTP", "modelVersion": MODEL_VERSION,
-            "restUrl": f"{URL}/command", "method": "POST", "contentType": "text/plain", "body": body,
-            "noCorsMode": False, "useCorsProxy": False, "isLiveAction": False}
+            "restUrl": f"{url}/command", "method": "POST", "contentType": "text/plain", "body": body,
+            **_auth(token), "noCorsMode": False, "useCorsProxy": False, "isLiveAction": False}
 
 
 def _element(element_id: str, x: int, y: int, label: str, colour: str, actions: list, width: int = 1,
@@ -74,13 +85,13 @@ def _element(element_id: str, x: int, y: int, label: str, colour: str, actions: 
             "actions": actions, "type": kind, "backgroundColor": colour, "hidden": False, **extra}
 
 
-def _live(element_id: str, x: int, width: int, label: str, field: str) -> dict:
+def _live(element_id: str, x: int, width: int, label: str, field: str, url: str, token: str | None) -> dict:
     """A live element showing `field` of GET /status after `label`. The label has no "{0}":
     AsTeRICS-Grid appends the value to a label without one, but shows "{0}" itself while the
     value is empty (no nav running, no event yet, the bridge not answering)."""
     status = {"id": f"{element_id}-http", "modelName": "GridActionHTTP", "modelVersion": MODEL_VERSION,
-              "restUrl": f"{URL}/status", "method": "GET", "contentType": "text/plain",
-              "acceptHeader": "application/json", "noCorsMode": False, "useCorsProxy": False,
+              "restUrl": f"{url}/status", "method": "GET", "contentType": "text/plain",
+              "acceptHeader": "application/json", **_auth(token), "noCorsMode": False, "useCorsProxy": False,
               "isLiveAction": True}
     return _element(element_id, x, 0, label, "#ffffff", [], width, "ELEMENT_TYPE_LIVE",
                     mode="MODE_ACTION_RESULT", updateSeconds=1, liveAction=status, extractMode="EXTRACT_JSON",
@@ -93,26 +104,27 @@ def _navigate(element_id: str, x: int, label: str, to: str) -> dict:
     return _element(element_id, x, 0, label, "#d1c4e9", [action])
 
 
-def grid(grid_id: str) -> dict:
+def grid(grid_id: str, url: str = URL, token: str | None = None) -> dict:
     label, rows = KEYBOARDS[grid_id]
     others = [g for g in KEYBOARDS if g != grid_id]
-    elements = [_live(f"{grid_id}-state", 0, 2, "robot: ", "text"),
-                _live(f"{grid_id}-event", 2, 1, "event: ", "last_event")]
+    elements = [_live(f"{grid_id}-state", 0, 2, "robot: ", "text", url, token),
+                _live(f"{grid_id}-event", 2, 1, "event: ", "last_event", url, token)]
     elements += [_navigate(f"{grid_id}-to-{g}", 3 + i, KEYBOARDS[g][0], g) for i, g in enumerate(others)]
     for y, row in enumerate(rows, start=1):
         for x, cell in enumerate(row):
             if cell is not None:
                 text, command, colour = cell
                 eid = f"{grid_id}-{command.replace(' ', '-')}"
-                elements.append(_element(eid, x, y, text, colour, [http_action(eid, command)]))
+                elements.append(_element(eid, x, y, text, colour, [http_action(eid, command, url, token)]))
     return {"id": grid_id, "modelName": "GridData", "modelVersion": MODEL_VERSION, "label": _label(label),
             "rowCount": len(rows) + 1, "minColumnCount": COLUMNS, "gridElements": elements,
             "additionalFiles": [], "webRadios": [], "showGlobalGrid": False, "keyboardMode": None}
 
 
-def backup() -> dict:
-    """The three keyboards as one AsTeRICS-Grid backup file (import it in "Manage grids")."""
-    return {"grids": [grid(g) for g in KEYBOARDS], "dictionaries": [],
+def backup(url: str = URL, token: str | None = None) -> dict:
+    """The three keyboards as one AsTeRICS-Grid backup file (import it in "Manage grids"),
+    calling the bridge at `url` with `token` (none: the shipped file, without auth fields)."""
+    return {"grids": [grid(g, url, token) for g in KEYBOARDS], "dictionaries": [],
             "metadata": {"homeGridId": "asibot-drive"}}
 
 
@@ -121,8 +133,8 @@ def commands() -> list[str]:
     return [cell[1] for _, rows in KEYBOARDS.values() for row in rows for cell in row if cell is not None]
 
 
-def text() -> str:
-    return json.dumps(backup(), indent=1, ensure_ascii=False) + "\n"
+def text(url: str = URL, token: str | None = None) -> str:
+    return json.dumps(backup(url, token), indent=1, ensure_ascii=False) + "\n"
 
 
 if __name__ == "__main__":

@@ -43,6 +43,10 @@ class LineDecoder:
     def pending(self) -> int:
         return len(self._buf)
 
+    def partial(self) -> bool:
+        """Whether a line has begun and not ended (also one too long, being skipped)."""
+        return bool(self._buf) or self._skipping
+
     def feed(self, data: bytes) -> list[str | BadLine]:
         out: list[str | BadLine] = []
         self._buf += data

@@ -100,6 +100,10 @@ class Decoder:
         """Bytes held for a frame not complete yet."""
         return len(self._buf)
 
+    def partial(self) -> bool:
+        """Whether a frame has begun (its '@' came) and not ended."""
+        return bool(self._buf)
+
     def feed(self, data: bytes) -> list[Frame | BadFrame]:
         self._buf += data
         out: list[Frame | BadFrame] = []

@@ -8,6 +8,7 @@ import threading
 from asibot import keys
 from asibot import messages as m
 from asibot.bus import Bus
+from asibot.local_http import Callers
 from asibot.testing import Inbox, wait_until
 
 from asibot.asterics_bridge import netconnection as nc
@@ -18,6 +19,8 @@ from .fakes import FakeArm, FakeNav, FakeTasks
 
 ROBOT = "pioneer-sim"
 OTHER = "asibot-sim"
+#: The HTTP token of the test bridges (the service makes a random one and keeps it).
+HTTP_TOKEN = "grid-s3cret"
 
 
 class Clock:
@@ -30,10 +33,13 @@ class Clock:
 
 class Bridge:
     """Doubles of nav (pioneer-sim), two arms (pioneer-sim, asibot-sim) and the tasks, the
-    dispatcher, and (`sockets=True`) its servers on free loopback ports."""
+    dispatcher, and (`sockets=True`) its servers on free loopback ports. `token`: what TCP
+    clients must give (--token); `http_token`: what HTTP requests must carry; `origins`: the
+    web pages allowed to call the HTTP port, `hosts` the names it answers to besides loopback."""
 
     def __init__(self, endpoint: str, *, sockets: bool = True, limits: Limits = Limits(),
-                 token: str | None = None, longest: float = 60.0, clock=None) -> None:
+                 token: str | None = None, http_token: str | None = HTTP_TOKEN, origins: tuple[str, ...] = (),
+                 hosts: tuple[str, ...] = (), longest: float = 60.0, clock=None) -> None:
         self.bus = Bus("test", endpoint)
         self.svc_bus = Bus("asterics_bridge", endpoint)
         self.nav = FakeNav(self.bus, ROBOT)
@@ -45,8 +51,8 @@ class Bridge:
         self.events = {robot: self.bus.publisher(keys.events(robot), m.Event) for robot in (ROBOT, OTHER)}
         self.cmd_vel = Inbox()
         self.bus.subscribe(keys.base_cmd_vel(ROBOT), m.Twist, self.cmd_vel)
-        self.servers = Servers(self.dispatcher, tcp_port=0, http_port=0, events=DEFAULT_EVENTS,
-                               limits=limits).start() if sockets else None
+        self.servers = Servers(self.dispatcher, tcp_port=0, http_port=0, events=DEFAULT_EVENTS, limits=limits,
+                               http_token=http_token, callers=Callers(hosts, origins)).start() if sockets else None
 
     def event(self, code: str, text: str, level: str = "warning", robot: str = ROBOT) -> None:
         self.events[robot].put(m.Event(level=level, code=code, text=text))
@@ -65,8 +71,11 @@ class Bridge:
 class Client:
     """A TCP client with a reader thread: NetConnection frames or text lines."""
 
-    def __init__(self, port: int, *, rcvbuf: int | None = None, read: bool = True) -> None:
+    def __init__(self, port: int, *, rcvbuf: int | None = None, read: bool = True, source: str | None = None) -> None:
+        """`source`: the loopback address to connect from (127.0.0.2: another client address)."""
         self.sock = socket.socket()
+        if source:
+            self.sock.bind((source, 0))
         if rcvbuf:
             self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
         self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)

@@ -5,26 +5,32 @@ import http.client
 import json
 import socket
 
+from unittest.mock import ANY
+
 import pytest
 
 from asibot.testing import wait_until
 
 from asibot.asterics_bridge.servers import Limits
 
-from .harness import OTHER, ROBOT, Bridge
+from .harness import HTTP_TOKEN, OTHER, ROBOT, Bridge
+
+AUTH = {"Authorization": f"Bearer {HTTP_TOKEN}"}
+GRID = "https://grid.asterics.eu"
 
 
 @pytest.fixture
 def bridge(memory_bus):
-    b = Bridge(memory_bus, limits=Limits(http_body_bytes=1024, http_header_bytes=2048))
+    b = Bridge(memory_bus, limits=Limits(http_body_bytes=1024, http_header_bytes=2048), origins=(GRID,))
     yield b
     b.close()
 
 
-def request(bridge, method, path, body=None, headers=None):
+def request(bridge, method, path, body=None, headers=None, auth=True):
+    """One request, with the bridge's token unless `auth` is False or `headers` carry their own."""
     conn = http.client.HTTPConnection("127.0.0.1", bridge.servers.http_port, timeout=5)
     try:
-        conn.request(method, path, body=body, headers=headers or {})
+        conn.request(method, path, body=body, headers={**(AUTH if auth else {}), **(headers or {})})
         r = conn.getresponse()
         return r.status, dict(r.getheaders()), r.read().decode()
     finally:
@@ -41,9 +47,12 @@ def raw(bridge, data: bytes) -> bytes:
 
 
 def test_text_plain_command_as_asterics_grid_sends_it(bridge):
-    status, headers, body = request(bridge, "POST", "/command", "forward", {"Content-Type": "text/plain"})
+    basic = base64.b64encode(f"asibot:{HTTP_TOKEN}".encode()).decode()     # authUser/authPw
+    status, headers, body = request(bridge, "POST", "/command", "forward", {
+        "Content-Type": "text/plain", "Origin": GRID, "Sec-Fetch-Site": "cross-site",
+        "Authorization": f"Basic {basic}"})
     assert (status, body) == (200, "ok: forward, until you say stop\n")
-    assert headers["Access-Control-Allow-Origin"] == "*"
+    assert headers["Access-Control-Allow-Origin"] == GRID and headers["Vary"] == "Origin"
     assert bridge.nav.requests("primitive") == [{"name": "forward", "continuous": True}]
     status, _, body = request(bridge, "POST", "/command", "stop")
     assert (status, body) == (200, "ok: stopped base and arm\n")
@@ -63,14 +72,23 @@ def test_json_commands(bridge):
                                                   "error": "unknown command 'forwrd'; did you mean 'forward'?"}
 
 
-def test_cors_preflight(bridge):
-    status, headers, body = request(bridge, "OPTIONS", "/command", headers={
-        "Origin": "https://grid.asterics.eu", "Access-Control-Request-Method": "POST",
-        "Access-Control-Request-Headers": "content-type"})
+def test_cors_preflight_of_the_allowed_grid(bridge):
+    status, headers, body = request(bridge, "OPTIONS", "/command", auth=False, headers={
+        "Origin": GRID, "Access-Control-Request-Method": "POST",
+        "Access-Control-Request-Headers": "content-type, authorization"})
     assert status == 204 and body == ""
-    assert headers["Access-Control-Allow-Origin"] == "*"
+    assert headers["Access-Control-Allow-Origin"] == GRID
     assert "POST" in headers["Access-Control-Allow-Methods"]
-    assert "content-type" in headers["Access-Control-Allow-Headers"]
+    assert {"content-type", "authorization"} <= set(headers["Access-Control-Allow-Headers"].split(", "))
+    assert "Access-Control-Allow-Private-Network" not in headers      # not asked for
+    status, headers, _ = request(bridge, "OPTIONS", "/command", auth=False, headers={
+        "Origin": GRID, "Access-Control-Request-Method": "POST", "Access-Control-Request-Private-Network": "true"})
+    assert status == 204 and headers["Access-Control-Allow-Private-Network"] == "true"
+
+
+def test_a_program_s_preflight_gets_no_cors(bridge):
+    status, headers, _ = request(bridge, "OPTIONS", "/command", auth=False)
+    assert status == 204 and not any(h.startswith("Access-Control") for h in headers)
 
 
 def test_status_for_live_elements(bridge):
@@ -113,7 +131,8 @@ def test_status_tells_the_pose_on_the_map_once_nav_has_one(bridge):
     (b"GET /nothing HTTP/1.1\r\n\r\n", b"404"),
 ])
 def test_bad_http_is_answered_and_moves_nothing(bridge, data, code):
-    reply = raw(bridge, data.replace(b"HTTP/1.1\r\n", b"HTTP/1.1\r\nConnection: close\r\n", 1))
+    own = b"HTTP/1.1\r\nConnection: close\r\nHost: 127.0.0.1\r\nAuthorization: Bearer " + HTTP_TOKEN.encode() + b"\r\n"
+    reply = raw(bridge, data.replace(b"HTTP/1.1\r\n", own, 1))
     assert reply.split(b" ")[1] == code, reply[:200]
     status, _, body = request(bridge, "POST", "/command", "faster")
     assert status == 200
@@ -122,7 +141,7 @@ def test_bad_http_is_answered_and_moves_nothing(bridge, data, code):
 
 def test_a_huge_body_is_refused_unread(bridge):
     with socket.create_connection(("127.0.0.1", bridge.servers.http_port), timeout=5) as s:
-        s.sendall(b"POST /command HTTP/1.1\r\nContent-Length: 100000000\r\n\r\n" + b"x" * 65536)
+        s.sendall(b"POST /command HTTP/1.1\r\nHost: localhost\r\nContent-Length: 100000000\r\n\r\n" + b"x" * 65536)
         assert s.recv(200).split(b" ")[1] == b"413"
 
 
@@ -130,24 +149,39 @@ def test_keep_alive_serves_several_requests(bridge):
     conn = http.client.HTTPConnection("127.0.0.1", bridge.servers.http_port, timeout=5)
     try:
         for text in ("faster", "slower", "status"):
-            conn.request("POST", "/command", body=text)
+            conn.request("POST", "/command", body=text, headers=AUTH)
             r = conn.getresponse()
             assert r.status == 200 and r.read().startswith(b"ok")
     finally:
         conn.close()
 
 
-def test_a_token_guards_the_network(memory_bus):
-    b = Bridge(memory_bus, token="s3cret")
+def test_the_token_guards_every_request_but_a_stop(memory_bus):
+    b = Bridge(memory_bus, http_token="s3cret")
     try:
-        status, headers, _ = request(b, "POST", "/command", "forward")
-        assert status == 401 and "WWW-Authenticate" in headers
-        assert request(b, "GET", "/status")[0] == 401
+        status, headers, body = request(b, "POST", "/command", "forward", auth=False)
+        assert status == 401 and "WWW-Authenticate" in headers and "http_token" in body
+        assert request(b, "GET", "/status", auth=False)[0] == 401
         assert request(b, "POST", "/command", "forward", {"Authorization": "Bearer wrong"})[0] == 401
+        assert request(b, "POST", "/command", "robot asibot-sim", auth=False)[0] == 401
+        assert b.nav.calls == [] and b.servers.counters["refused_token"] == 4
         basic = base64.b64encode(b"asterics:s3cret").decode()
         assert request(b, "POST", "/command", "faster", {"Authorization": f"Basic {basic}"})[0] == 200
         assert request(b, "POST", "/command", "forward", {"Authorization": "Bearer s3cret"})[0] == 200
-        assert request(b, "GET", "/status?token=s3cret")[0] == 200
-        assert [v for v, _ in b.nav.calls] == ["settings", "primitive"]
+        assert request(b, "GET", "/status?token=s3cret", auth=False)[0] == 200
+        # stopping is always safe: no token needed, as text or JSON
+        assert request(b, "POST", "/command", "stop", auth=False) == (200, ANY, "ok: stopped base and arm\n")
+        assert request(b, "POST", "/command", json.dumps({"command": "halt"}), {"Content-Type": "application/json"},
+                       auth=False)[0] == 200
+        assert [v for v, _ in b.nav.calls] == ["settings", "primitive", "primitive", "primitive"]
+        assert [r["name"] for r in b.nav.requests("primitive")] == ["forward", "stop", "stop"]
+    finally:
+        b.close()
+
+
+def test_a_bridge_without_http_token_takes_commands_from_programs(memory_bus):
+    b = Bridge(memory_bus, http_token=None)
+    try:
+        assert request(b, "POST", "/command", "faster", auth=False)[0] == 200
     finally:
         b.close()

@@ -158,3 +158,19 @@ def test_the_docs_table_lists_every_word():
     doc = (Path(__file__).resolve().parents[2] / "docs" / "asterics.md").read_text()
     for w in vocab.WORDS:
         assert f"| `{w.word}{f' <{w.arg}>' if w.arg else ''}` |" in doc, w.word
+
+
+def test_the_user_s_grids_carry_the_bridge_s_address_and_token(backup):
+    """AsTeRICS-Grid sends authUser/authPw as Basic auth; the bridge reads the password."""
+    mine = grids.backup("http://127.0.0.1:8091", "t0ken")
+    actions = [a for g in mine["grids"] for e in g["gridElements"]
+               for a in e["actions"] + ([e["liveAction"]] if "liveAction" in e else [])
+               if a["modelName"] == "GridActionHTTP"]
+    assert len(actions) == len([a for g in backup["grids"] for e in g["gridElements"]
+                                for a in e["actions"] + ([e["liveAction"]] if "liveAction" in e else [])
+                                if a["modelName"] == "GridActionHTTP"])
+    for a in actions:
+        assert set(a) <= HTTP_FIELDS and (a["authUser"], a["authPw"]) == (grids.AUTH_USER, "t0ken")
+        assert a["restUrl"] in ("http://127.0.0.1:8091/command", "http://127.0.0.1:8091/status")
+    shipped = json.dumps(backup)
+    assert "authPw" not in shipped        # the shipped file cannot know the user's token

@@ -55,6 +55,8 @@ def stack(tmp_path_factory):
         s.wait_alive("sim/pioneer-sim", "nav/pioneer-sim", "kinematics/pioneer-sim", "asterics_bridge/pioneer-sim",
                      timeout=120)
         s.truth = Truth(s.bus)
+        # the HTTP port's token, made by the bridge in the stack's data folder (http_token)
+        s.token = (s.data / "asterics" / "token").read_text().strip()
         wait_until(lambda: s.bus.call(keys.nav_rpc(ROBOT, "status"), timeout=5)["localised"], 30, interval=0.2,
                    message="nav never localised")
         yield s
@@ -70,7 +72,8 @@ def moved(a, b) -> float:
 def post(stack, text: str) -> tuple[int, str]:
     conn = http.client.HTTPConnection("127.0.0.1", stack.http_port, timeout=30)
     try:
-        conn.request("POST", "/command", body=text, headers={"Content-Type": "text/plain"})
+        conn.request("POST", "/command", body=text, headers={"Content-Type": "text/plain",
+                                                             "Authorization": f"Bearer {stack.token}"})
         r = conn.getresponse()
         return r.status, r.read().decode()
     finally:
@@ -135,7 +138,7 @@ def places(stack) -> dict:
 def http_status(stack) -> dict:
     conn = http.client.HTTPConnection("127.0.0.1", stack.http_port, timeout=10)
     try:
-        conn.request("GET", "/status")
+        conn.request("GET", "/status", headers={"Authorization": f"Bearer {stack.token}"})
         return json.loads(conn.getresponse().read())
     finally:
         conn.close()
