@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import os
 import socket
-import textwrap
 import threading
 import uuid
 from pathlib import Path
@@ -22,6 +21,8 @@ from asibot.bus import Bus, open_router
 from asibot.testing import free_port, wait_until
 from asibot.web.runner import Limits, ProgramRunner, RunResult
 from asibot.web.sandbox import ACCESS_INSIDE, NOBODY, Sandbox, probe
+
+from .test_runner import alive, processes_with, program
 
 ROBOT = "sandbox-bot"
 
@@ -67,34 +68,6 @@ def make():
     yield factory
     for r in made:
         r.runner.close()
-
-
-def program(folder: Path, text: str, name: str = "prog.py") -> Path:
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / name
-    path.write_text(textwrap.dedent(text).lstrip())
-    return path
-
-
-def alive(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except (FileNotFoundError, ProcessLookupError):
-        return False
-    return state not in ("Z", "X")
-
-
-def processes_with(marker: str) -> list[int]:
-    """This side's pids of the live processes with `marker` in their command line."""
-    found = []
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                if marker.encode() in (entry / "cmdline").read_bytes() and alive(int(entry.name)):
-                    found.append(int(entry.name))
-            except OSError:
-                pass
-    return found
 
 
 # A child that calls setsid() and a daemon (double fork, setsid, orphaned): both leave the
