@@ -34,6 +34,9 @@ def test_build_serves_and_reports_health(memory_bus):
     (("--host", "0.0.0.0"), "add --token"),
     (("--events", "1=fly"), "unknown command 'fly'"),
     (("--menu", "next"), "it is what walks the menu"),
+    (("--token", "x", "--no-token"), "contradict each other"),
+    (("--allow-origin", "grid.asterics.eu"), "is not an origin: write it as scheme://name"),
+    (("--max-clients", "10", "--max-clients-per-address", "11"), "--max-clients-per-address must be 1 to"),
     (("--robot", "a/b"), "--robot:"),
 ])
 def test_bad_arguments_are_sentences(memory_bus, argv, words):
@@ -111,19 +114,5 @@ def test_no_token_and_the_allowed_origins(memory_bus, monkeypatch):
         built = service.build(bus, args("--port", "0", "--http-port", "-1"))
         assert built.servers.callers.origins == set()
         built.close()
-    finally:
-        bus.close()
-
-
-@pytest.mark.parametrize("argv, words", [
-    (("--token", "x", "--no-token"), "contradict each other"),
-    (("--allow-origin", "grid.asterics.eu"), "is not an origin: write it as scheme://name"),
-    (("--max-clients", "10", "--max-clients-per-address", "11"), "--max-clients-per-address must be 1 to"),
-])
-def test_bad_access_arguments_are_sentences(memory_bus, argv, words):
-    bus = Bus("asterics_bridge", memory_bus)
-    try:
-        with pytest.raises(ValueError, match=words):
-            service.build(bus, args("--port", "0", "--http-port", "-1", *argv))
     finally:
         bus.close()
