@@ -235,8 +235,12 @@ def test_estop_during_a_running_program_stops_the_arm_and_the_program(page, kitc
     page.goto(kitchen.web_url + "#launcher")
     page.goto(kitchen.web_url + "#program")
     page.get_by_role("button", name="slow_wave").click()
+    # Opening is a request: Run before it lands would run the program open before, or nothing.
+    page.get_by_role("heading", name="slow_wave.py").wait_for(timeout=10000)
     page.get_by_role("button", name="Run", exact=True).click()
-    wait_until(lambda: arm.moving(), timeout=20)
+    output = page.get_by_role("log", name="Program output")
+    wait_until(lambda: arm.moving(), timeout=20,
+               message=lambda: f"the arm did not move; the program's output: {output.inner_text()!r}")
     pressed = time.monotonic()
     page.keyboard.press("Escape")                                            # the emergency stop key
     arm.stopped_at(pressed)
