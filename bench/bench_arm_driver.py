@@ -90,11 +90,11 @@ def main() -> int:
         controller = ownership.announce(client, "asibot", "arm", "bench")   # commands carry it
         try:
             testing.wait_until(lambda: states and states[-1].mode == "idle", 15, message="driver did not start")
-            testing.wait_until(lambda: service.holder.current == controller, 5, message="driver did not see the bench")
+            testing.wait_until(lambda: service.holder.current == controller.id, 5, message="driver did not see the bench")
             cmd.wait_for_subscribers(5)
 
             # Bus load while streaming a slow motion on every joint.
-            cmd.put(ArmCommand(mode="position", values=[0.5] * 5, controller=controller))
+            controller.put(cmd, ArmCommand(mode="position", values=[0.5] * 5))
             time.sleep(0.3)
             sniffer.take()
             t0 = time.time()
@@ -112,7 +112,7 @@ def main() -> int:
             units = cfg.joints[0].units
             here = units.to_counts(states[-1].positions[0])
             home = units.to_rad(here)
-            cmd.put(ArmCommand(mode="position", values=[home] + list(states[-1].positions[1:]), controller=controller))
+            controller.put(cmd, ArmCommand(mode="position", values=[home] + list(states[-1].positions[1:])))
             time.sleep(0.3)
             rest = list(states[-1].positions[1:])
             latencies = []
@@ -121,7 +121,7 @@ def main() -> int:
                 want = units.to_counts(goal)
                 sniffer.take()
                 sent = time.time()
-                cmd.put(ArmCommand(mode="position", values=[goal] + rest, controller=controller))
+                controller.put(cmd, ArmCommand(mode="position", values=[goal] + rest))
                 deadline = time.monotonic() + 0.5
                 found = None
                 while found is None and time.monotonic() < deadline:

@@ -98,9 +98,9 @@ def cmd_vel_latency(samples: int = 200) -> list[float]:
             user = Bus("bench")
             try:
                 controller = ownership.announce(user, "pioneer", "base", "bench")   # cmd_vel carries it
-                testing.wait_until(lambda: svc.driver.connected and svc.holder.current == controller, 10)
+                testing.wait_until(lambda: svc.driver.connected and svc.holder.current == controller.id, 10)
                 pub = user.publisher(keys.base_cmd_vel("pioneer"), Twist, express=True)
-                pub.put(Twist(vx=0.0, wz=0.0, controller=controller))
+                controller.put(pub, Twist(vx=0.0, wz=0.0))
                 time.sleep(0.5)
                 out = []
                 for i in range(samples):
@@ -108,7 +108,7 @@ def cmd_vel_latency(samples: int = 200) -> list[float]:
                     with emu.lock:
                         start = len(emu.robot.received)
                     t0 = time.monotonic()
-                    pub.put(Twist(vx=mm / 1000.0, wz=0.0, controller=controller))
+                    controller.put(pub, Twist(vx=mm / 1000.0, wz=0.0))
                     deadline = t0 + 0.5
                     while time.monotonic() < deadline:
                         with emu.lock:
@@ -118,7 +118,7 @@ def cmd_vel_latency(samples: int = 200) -> list[float]:
                             break
                         time.sleep(0.002)     # the emulator stamps arrival; polling slowly spares the GIL
                     time.sleep(0.01)
-                pub.put(Twist(vx=0.0, wz=0.0, controller=controller))
+                controller.put(pub, Twist(vx=0.0, wz=0.0))
             finally:
                 user.close()
                 svc.close()

@@ -60,10 +60,10 @@ from asibot.messages import Twist
 robot, vx = sys.argv[1], float(sys.argv[2])
 bus = Bus("bench-sender", wait=20)
 me = ownership.announce(bus, robot, "base", "bench-sender")
-testing.wait_until(lambda: bus.call(keys.driver_rpc(robot, "status"), timeout=2)["holders"]["base"] == me, 10)
+testing.wait_until(lambda: bus.call(keys.driver_rpc(robot, "status"), timeout=2)["holders"]["base"] == me.id, 10)
 time.sleep(0.3)                     # a stream begun after taking hold moves the base at once
 pub = bus.publisher(keys.base_cmd_vel(robot), Twist, express=True)
-testing.Stream(lambda: pub.put(Twist(vx=vx, wz=0.0, controller=me)), period=0.05)
+testing.Stream(lambda: me.put(pub, Twist(vx=vx, wz=0.0)), period=0.05)
 print("READY", flush=True)
 sys.stdin.read()
 """
@@ -274,22 +274,22 @@ def base_stops(procs: Processes, observer: Bus, rng: random.Random) -> dict[str,
     out: dict[str, list[float]] = {"watchdog": [], "zero": [], "kill": []}
     with Bus("bench-base-controller") as bus:
         me = ownership.announce(bus, BASE, "base", "bench")
-        testing.wait_until(lambda: held_by(bus, me) and trace.last() is not None, 30,
+        testing.wait_until(lambda: held_by(bus, me.id) and trace.last() is not None, 30,
                            message="the base driver did not connect to the emulator")
         time.sleep(COMMAND_WATCHDOG_S)
         pub = bus.publisher(keys.base_cmd_vel(BASE), Twist, express=True)
         sign = 1.0
         for _ in range(REPS):
-            send = (lambda v: lambda: pub.put(Twist(vx=v, wz=0.0, controller=me)))(sign * BASE_SPEED)
+            send = (lambda v: lambda: me.put(pub, Twist(vx=v, wz=0.0)))(sign * BASE_SPEED)
             out["watchdog"].append(stream_then(send, trace, last_sent, rng))
 
             def zero(stream: testing.Stream) -> float:
                 stream.pause()
                 t = time.monotonic()
-                pub.put(Twist(vx=0.0, wz=0.0, controller=me))
+                me.put(pub, Twist(vx=0.0, wz=0.0))
                 return t
 
-            send = (lambda v: lambda: pub.put(Twist(vx=v, wz=0.0, controller=me)))(-sign * BASE_SPEED)
+            send = (lambda v: lambda: me.put(pub, Twist(vx=v, wz=0.0)))(-sign * BASE_SPEED)
             out["zero"].append(stream_then(send, trace, zero, rng))
             sign = -sign
     for i in range(REPS):

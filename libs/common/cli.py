@@ -12,10 +12,11 @@ import time
 from pathlib import Path
 from typing import Callable
 
-from asibot import access, keys, messages, navcli
+from asibot import access, estop, keys, navcli
 from asibot.bus import DEFAULT_ROUTER, ROUTER_ENV, Bus, open_router, router_endpoint
 from asibot.errors import AsibotError
 from asibot.estop import who
+from asibot.identity import Identity
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
@@ -174,8 +175,9 @@ def cmd_estop(args: argparse.Namespace) -> int:
             return 1
         reason = f"asibot estop by {_who()}"
         by = who("asibot estop", login_of="estop")
+        me = Identity("asibot-estop")
         for robot in robots:
-            bus.latch(keys.estop(robot), messages.EStop(engaged=True, reason=reason, by=by))
+            estop.latch(bus, robot, me, True, reason, by)
         code = 0
         for robot in robots:
             engaged = _wait_for(lambda r=robot: _driver_estop(bus, r), 2.0)
@@ -195,7 +197,7 @@ def cmd_release(args: argparse.Namespace) -> int:
     with Bus("release", wait=args.wait) as bus:
         if _refused(bus, [args.robot]):
             return 1
-        bus.latch(keys.estop(args.robot), messages.EStop(engaged=False, reason="asibot release", by=by))
+        estop.latch(bus, args.robot, Identity("asibot-release"), False, "asibot release", by)
         if _wait_for(lambda: _driver_estop(bus, args.robot) is False, 2.0):
             print(f"{args.robot}: emergency stop released by {by}; it moves again only on a new motion request")
             return 0

@@ -10,11 +10,11 @@ import os
 import time
 from typing import Sequence
 
-from asibot import keys
+from asibot import estop, keys
 from asibot.bus import Bus
 from asibot.errors import RpcError, Timeout
 from asibot.estop import who
-from asibot.messages import EStop
+from asibot.identity import Identity
 
 #: Per-call timeout for quick verbs, s.
 CALL_TIMEOUT = 5.0
@@ -34,6 +34,7 @@ class _Client:
         self.robot: str | None = None
         self.timeout = timeout
         self._bus: Bus | None = None
+        self._me = Identity("program")   # signs its estops and releases (asibot.estop)
         if robot:
             self.open(robot)
 
@@ -76,14 +77,12 @@ class _Client:
         """Engage the robot's emergency stop: it stops at once and refuses every motion until
         release(). The drivers and the controller keep it latched, so it holds after this program
         ends (asibot.estop); their events say who engaged it (this user, program and pid)."""
-        self._connected().latch(keys.estop(self.robot), EStop(engaged=True, reason=reason,
-                                                                         by=who(login_of=self._bus.name)))
+        estop.latch(self._connected(), self.robot, self._me, True, reason, who(login_of=self._bus.name))
 
     def release(self, reason: str = "released from a program") -> None:
         """Release the emergency stop. Nothing moves by itself afterwards: the robot moves again
         only on a motion request made after the release. The drivers' events say who released it."""
-        self._connected().latch(keys.estop(self.robot), EStop(engaged=False, reason=reason,
-                                                                         by=who(login_of=self._bus.name)))
+        estop.latch(self._connected(), self.robot, self._me, False, reason, who(login_of=self._bus.name))
 
     def reset_fault(self) -> dict:
         """Ask the robot's driver to clear a fault (re-initialise the drive that failed);

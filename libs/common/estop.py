@@ -15,8 +15,12 @@ the stack starts released, which moves nothing by itself (a robot moves only on 
 motion request). Hardware that must stay stopped across a restart of its software keeps a
 physical estop in its power circuit; this one is a software latch.
 
-`who()` names the person and program that engage or release it (`EStop.by`), so the drivers'
-events say who released a robot.
+`who()` names the person and program that engage or release it (`EStop.by`), and `latch`
+signs the message with the sender's key (asibot.identity). A release counts only signed:
+one that is not (a stranger's, or one that borrows another's name and cannot sign for it)
+is ignored by every process that follows the estop, and the drivers' events name a release
+by what its sender said and the key that signed it (`named`). An engage counts signed or not:
+stopping needs no proof.
 """
 
 from __future__ import annotations
@@ -29,7 +33,8 @@ import sys
 import threading
 from typing import Any, Callable
 
-from asibot import access, keys
+from asibot import access, identity, keys
+from asibot.identity import Identity
 from asibot.messages import EStop
 
 log = logging.getLogger(__name__)
@@ -48,22 +53,47 @@ def who(program: str | None = None, login_of: str | None = None) -> str:
     return f"{user}@{socket.gethostname()} ({program}, pid {os.getpid()}){login}"
 
 
-def released_by(msg: EStop) -> str:
-    """" by NAME" when the release says who did it, else ""; for the drivers' sentences."""
-    return f" by {msg.by}" if msg.by else ""
+def context(robot: str) -> str:
+    """What an estop's signature is for (asibot.identity)."""
+    return f"{robot}/estop"
+
+
+def latch(bus: Any, robot: str, sender: Identity, engaged: bool, reason: str = "", by: str = "") -> EStop:
+    """Engage or release the estop of `robot`: the EStop signed by `sender`, latched on `bus`."""
+    msg = sender.sign(EStop(engaged=engaged, reason=reason, by=by), context(robot))
+    bus.latch(keys.estop(robot), msg)
+    return msg
+
+
+def refused_text(msg: EStop, why: str) -> str:
+    """The drivers' Event for a release that did not count."""
+    return (f"A release of the emergency stop ({named(msg) or 'anonymous'}) was ignored: {why}. The robot "
+            "stays stopped; release it from the page, `asibot release` or a program's release().")
+
+
+def named(msg: EStop) -> str:
+    """Who engaged or released it, for the drivers' sentences: what its sender said, and the
+    key that signed it ("alice@home (asibot release, pid 8), key asibot-release-mfrgg2lt");
+    "" when it says nothing and is not signed."""
+    key = f"key {identity.short(msg.signer)}" if msg.signer and msg.signature else ""
+    return ", ".join(filter(None, (msg.by, key or ("unsigned" if msg.by else ""))))
 
 
 class EStopState:
     """Follow the estop of `robot` on `bus`: `on_change(msg)` for every newer EStop (the
-    latched one first), and keep serving the newest, so it outlives its sender.
+    latched one first), and keep serving the newest, so it outlives its sender. A release
+    that is not signed is ignored, and given to `on_refused(msg, why)`.
 
     A state older than the one held (by stamp: two latches answered, or a sample that
     overtook the latched answer) is ignored, and so is the same one twice (the latched
     answer and the sample of one latch).
     """
 
-    def __init__(self, bus: Any, robot: str, on_change: Callable[[EStop], None]) -> None:
+    def __init__(self, bus: Any, robot: str, on_change: Callable[[EStop], None],
+                 on_refused: Callable[[EStop, str], None] | None = None) -> None:
         self.key = keys.estop(robot)
+        self.context = context(robot)
+        self._on_refused = on_refused
         self._bus = bus
         self._on_change = on_change
         self._lock = threading.Lock()
@@ -76,6 +106,12 @@ class EStopState:
         return state is not None and state.engaged
 
     def _on_estop(self, msg: EStop) -> None:
+        why = None if msg.engaged else identity.refusal(self.context, msg)
+        if why is not None:
+            log.warning("ignored a release of the estop (%s): %s", named(msg) or "anonymous", why)
+            if self._on_refused is not None:
+                self._on_refused(msg, why)
+            return
         with self._lock:
             if self.state is not None and (msg.stamp < self.state.stamp or msg == self.state):
                 return

@@ -391,11 +391,14 @@ COMMAND_WATCHDOG_S = 0.2
 class ArmCommand:
     """Joint reference: position (rad, optional velocity feed-forward rad/s) or velocity (rad/s).
     `controller` is the identity of the controller that sends it: a driver obeys only the one
-    that holds the robot (asibot.ownership)."""
+    that holds the robot (asibot.ownership), and only when that controller's key signed it
+    (`seq`, `signature`: asibot.identity)."""
     mode: str
     values: list[float]
     velocities: list[float] = dataclasses.field(default_factory=list)
     controller: str = ""
+    seq: int = 0
+    signature: bytes = b""
 
     def __post_init__(self) -> None:
         if self.mode not in ("position", "velocity"):
@@ -415,7 +418,9 @@ class GripperState:
 @message
 class GripperCommand:
     opening: float  # m between fingers
-    controller: str = ""  # the sender's identity, as in ArmCommand
+    controller: str = ""  # the sender's identity, signed, as in ArmCommand
+    seq: int = 0
+    signature: bytes = b""
 
     def __post_init__(self) -> None:
         finite([self.opening], "GripperCommand", "opening")
@@ -424,10 +429,12 @@ class GripperCommand:
 @message
 class Twist:
     """Base velocity command: vx m/s forward, wz rad/s counter-clockwise. `controller` is the
-    identity of the base controller that sends it (asibot.ownership)."""
+    identity of the base controller that sends it (asibot.ownership), signed as ArmCommand is."""
     vx: float
     wz: float
     controller: str = ""
+    seq: int = 0
+    signature: bytes = b""
 
     def __post_init__(self) -> None:
         finite([self.vx, self.wz], "Twist", "vx/wz")
@@ -564,10 +571,15 @@ class CartState:
 @message
 class EStop:
     """The latched emergency stop of one robot; `by` says who engaged or released it (a person
-    and program, `asibot.estop.who()`), for the drivers' events and the logs."""
+    and program, `asibot.estop.who()`), for the drivers' events and the logs. `signer` is the
+    id whose key signed it (`seq`, `signature`: asibot.identity): a release counts only signed,
+    so `by` is what that key's holder said, and nobody else can say it in its name."""
     engaged: bool
     reason: str = ""
     by: str = ""
+    signer: str = ""
+    seq: int = 0
+    signature: bytes = b""
 
 
 @message

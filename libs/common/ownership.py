@@ -6,7 +6,8 @@ moved the arm while the user's `stop()` answered ok. The rule, kept by every dri
 CANopen arm driver, the ARCOS base driver, the sim):
 
 - A controller announces itself with a liveliness token whose key names it, an identity new
-  at every start (`new_id`), so a restarted controller is a new one. The arm and its gripper
+  at every start that carries its public key (`asibot.identity`), so a restarted controller
+  is a new one. The arm and its gripper
   are driven by the kinematics service, on `keys.controller_alive(robot, id)`
   (`rb/<robot>/controller/alive/<id>`); a mobile base by the program that drives it (the nav
   service, a teleop program, a test) on `keys.base_controller_alive(robot, id)`
@@ -16,38 +17,34 @@ CANopen arm driver, the ARCOS base driver, the sim):
   token vanishes (the process ended, crashed or lost the router); then the oldest of the
   others alive takes over, if any.
 - Every command carries its sender's id (`ArmCommand.controller`, `GripperCommand.controller`,
-  `Twist.controller`). A driver obeys only the holder's: any other command (another
-  controller's, a replayed or anonymous one) is refused whole with an Event, rate-limited
-  like every refusal (`asibot.events.EventThrottle`), and moves nothing.
+  `Twist.controller`), a sequence number and a signature by that id's key (`Controller.put`).
+  A driver obeys only the holder's, signed by the holder's key, newer than the last it obeyed:
+  any other command (another controller's, one that borrows the holder's id, a replayed or
+  anonymous one) is refused whole with an Event, rate-limited like every refusal
+  (`asibot.events.EventThrottle`), and moves nothing.
 - Stopping needs no ownership: the estop stops every part whoever engages it, and the
   kinematics `stop` verb (`CartesianClient.stop()`) makes the holder command a hold,
   whoever moved the arm. A change of holder, or its loss, stops the part and re-arms it
   (`asibot.arming`): a stream still running from before does not move it.
 
-This is not access control (anyone on the router may announce a controller; keeping
-strangers off the router is the router's job): it makes one program at a time drive each
-part, and keeps strays from driving it by accident.
+Anyone on the router may still announce a controller (keeping strangers off the router is
+the router's job, `asibot.access`): while another holds a part, a newcomer only waits in line,
+and nobody can send commands as the holder, on the open router too.
 """
 
 from __future__ import annotations
 
-import secrets
 import threading
 import time
 from typing import Any, Callable, Iterable
 
-from asibot import keys
+from asibot import identity, keys
 from asibot.errors import RpcError
 from asibot.events import CommandRefused
+from asibot.identity import Identity
 
 #: The parts of a robot that have a holder: the arm with its gripper, and the mobile base.
 PARTS = ("arm", "base")
-
-
-def new_id(name: str) -> str:
-    """A controller's identity: `name` and a random suffix ("kinematics-3fa2b1c4"), a valid
-    key chunk, different at every start."""
-    return f"{name}-{secrets.token_hex(4)}"
 
 
 def token_key(robot: str, part: str, controller: str) -> str:
@@ -65,11 +62,42 @@ def pattern(robot: str, part: str) -> str:
     return keys.controllers_alive(robot) if part == "arm" else keys.base_controllers_alive(robot)
 
 
-def announce(bus: Any, robot: str, part: str = "arm", name: str = "controller") -> str:
-    """Announce a new controller of `part` of `robot` on `bus`; returns its id, which every
-    command it sends carries. It holds the part if no other controller does (see above)."""
-    controller = new_id(name)
-    bus.announce(token_key(robot, part, controller))
+class Controller:
+    """A controller of `part` of `robot`: its identity, and the commands it signs and sends."""
+
+    def __init__(self, robot: str, part: str, name: str = "controller") -> None:
+        token_key(robot, part, "x")  # says what a wrong part is
+        self.robot, self.part = robot, part
+        self.identity = Identity(name)
+        self.id = self.identity.id
+        self.context = context(robot, part)
+
+    def sign(self, cmd: Any) -> Any:
+        """`cmd` named, numbered and signed as this controller's."""
+        return self.identity.sign(cmd, self.context)
+
+    def put(self, publisher: Any, cmd: Any) -> None:
+        """Sign `cmd` and publish it; in sequence order whichever thread sends."""
+        self.identity.put(publisher, cmd, self.context)
+
+    def announce(self, bus: Any) -> Any:
+        """The liveliness token that makes this controller alive on `bus` (see above)."""
+        return bus.announce(token_key(self.robot, self.part, self.id))
+
+    def __repr__(self) -> str:
+        return f"Controller({identity.short(self.id)!r} of the {self.part} of {self.robot})"
+
+
+def context(robot: str, part: str) -> str:
+    """What a command's signature is for: "<robot>/<part>" (asibot.identity)."""
+    return f"{robot}/{part}"
+
+
+def announce(bus: Any, robot: str, part: str = "arm", name: str = "controller") -> Controller:
+    """Announce a new controller of `part` of `robot` on `bus`; its `put` signs every command it
+    sends. It holds the part if no other controller does (see above)."""
+    controller = Controller(robot, part, name)
+    controller.announce(bus)
     return controller
 
 
@@ -77,6 +105,18 @@ class NotHolder(CommandRefused):
     """A command from a sender that does not hold the part: refused whole, nothing moves."""
 
     code = "not_holder"
+
+
+class NotSigned(CommandRefused):
+    """A command that names the holder but its key did not sign it: someone else's."""
+
+    code = "not_signed"
+
+
+class Replayed(CommandRefused):
+    """A command the holder signed, but not newer than one already obeyed: a copy played again."""
+
+    code = "replayed"
 
 
 class Holder:
@@ -90,8 +130,10 @@ class Holder:
                  on_change: Callable[[str | None], None] | None = None) -> None:
         self.pattern = pattern(robot, part)
         self.robot, self.part = robot, part
+        self.context = context(robot, part)
         self._on_change = on_change
         self._alive: list[str] = []          # ids in the order they came alive
+        self._obeyed: dict[tuple[str, str], int] = {}   # (id, type) -> newest sequence number
         self._lock = threading.Lock()
 
     @property
@@ -122,16 +164,33 @@ class Holder:
                 self._alive.append(controller)
             elif not alive and controller in self._alive:
                 self._alive.remove(controller)
+                for seen in [k for k in self._obeyed if k[0] == controller]:
+                    del self._obeyed[seen]
             after = self._alive[0] if self._alive else None
         if after != before and self._on_change is not None:
             self._on_change(after)
 
-    def refusal(self, controller: str) -> NotHolder | None:
-        """None when `controller` holds the part; otherwise the refusal, with its sentence."""
+    def refusal(self, cmd: Any) -> CommandRefused | None:
+        """None when the holder sent `cmd` (its id, signed by its key, newer than the last
+        obeyed of its type); otherwise the refusal, with its sentence. Call it once per
+        command: a command it lets through counts as obeyed."""
+        controller = cmd.controller
         holder = self.current
-        if controller and controller == holder:
-            return None
         what = f"the {self.part} of {self.robot}"
+        if controller and controller == holder:
+            why = identity.refusal(self.context, cmd)
+            if why is not None:
+                return NotSigned("not_signed", f"it names controller {identity.short(controller)}, which holds "
+                                               f"{what}, but {why}; a controller's commands are signed by "
+                                               "its own key (see asibot.identity)")
+            seen = (controller, type(cmd).__name__)
+            with self._lock:
+                if cmd.seq <= self._obeyed.get(seen, 0):
+                    return Replayed("replayed", f"{identity.short(controller)} signed it, but it is not newer "
+                                                f"than a {type(cmd).__name__} already obeyed (number {cmd.seq}): "
+                                                "a copy played again")
+                self._obeyed[seen] = cmd.seq
+            return None
         if holder is None:
             holds = f"no controller holds {what} (none is alive)"
         else:

@@ -18,10 +18,12 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from asibot import keys
+from asibot import estop, identity, keys, messages
 from asibot.bus import MEMORY_SCHEME, ROUTER_ENV, Bus, open_router
 from asibot.ownership import Holder
-from asibot.messages import ArmCommand, ArmState, GripperCommand, GripperState
+from asibot.errors import MessageError
+from asibot.identity import Identity
+from asibot.messages import ArmCommand, ArmState, EStop, GripperCommand, GripperState
 from asibot.timing import Ticker
 
 
@@ -73,6 +75,38 @@ def scheduling_delay(samples: int = 20, period: float = 0.005) -> float:
         time.sleep(period)
         worst = max(worst, time.monotonic() - t - period)
     return worst
+
+
+def release_counts_only_signed(bus: Any, robot: str, events: Callable[[str], list], by: str) -> None:
+    """The driver contract's estop release, as a driver test checks it: a release that only
+    writes a name (`by`) is refused with a `release_refused` Event; a signed one releases,
+    and its `estop_released` Event names `by` and the key that signed it. `events(code)` is
+    the driver's Events of that code so far."""
+    bus.latch(keys.estop(robot), EStop(engaged=False, by=by))
+    wait_until(lambda: events("release_refused"), 5, message="no release_refused event")
+    assert f"{by}, unsigned) was ignored: it is not signed" in events("release_refused")[0].text
+    assert not events("estop_released")
+    sender = Identity("asibot-release")
+    estop.latch(bus, robot, sender, False, "asibot release", by)
+    wait_until(lambda: events("estop_released"), 5, message="no estop_released event")
+    text = events("estop_released")[0].text
+    assert f"released by {by}, key {identity.short(sender.id)}" in text, text
+
+
+def signed_raw(controller: Any, cls: type, payload: dict) -> bytes:
+    """`payload` as a `cls` command of `controller` would travel: signed when it makes a valid
+    message (values a driver must refuse itself), else as it is, in its name (values the
+    message check refuses before any signature counts)."""
+    try:
+        msg = cls(**payload)
+    except MessageError:
+        return messages.pack({**payload, "controller": controller.id})
+    return messages.encode(controller.sign(msg))
+
+
+def release(bus: Any, robot: str, reason: str = "released by a test", by: str = "a test") -> EStop:
+    """Release the estop of `robot` as people and programs do: signed (asibot.estop)."""
+    return estop.latch(bus, robot, Identity("test"), False, reason, by)
 
 
 def wait_until(predicate: Callable[[], object], timeout: float = 5.0, interval: float = 0.01,
@@ -131,7 +165,7 @@ class IdealDriver:
         self.thread.start()
 
     def _on_command(self, cmd: ArmCommand) -> None:
-        if self.holder.refusal(cmd.controller) is not None:
+        if self.holder.refusal(cmd) is not None:
             with self._lock:
                 self.refused.append(cmd)
             return
@@ -142,7 +176,7 @@ class IdealDriver:
 
     def _on_grip(self, cmd: GripperCommand) -> None:
         with self._lock:
-            if self.holder.refusal(cmd.controller) is not None:
+            if self.holder.refusal(cmd) is not None:
                 self.refused.append(cmd)
                 return
             self._grip_pending = (cmd.opening, time.monotonic())

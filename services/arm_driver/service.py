@@ -12,7 +12,7 @@ import argparse
 import logging
 import os
 
-from asibot import keys
+from asibot import estop, keys
 from asibot.arm_driver import canbus, config
 from asibot.arm_driver import emulator as emulation
 from asibot.arm_driver.driver import ArmDriver, FaultError
@@ -23,7 +23,7 @@ from asibot.errors import RpcError
 from asibot.estop import EStopState
 from asibot.events import CommandRefused, EventThrottle, refusal_reason
 from asibot.messages import ArmCommand, ArmState, EStop, Event
-from asibot.ownership import Holder, holders_status
+from asibot.ownership import Holder, NotHolder, holders_status
 from asibot.runtime import Service
 
 log = logging.getLogger(__name__)
@@ -60,7 +60,7 @@ class ArmDriverService(Service):
         self.bus = bus
         self.driver = ArmDriver(CanopenMaster(can_bus, self.config), self.config,
                                 on_state=self._state.put, on_event=self._event)
-        self.estop = EStopState(bus, robot, self._on_estop)
+        self.estop = EStopState(bus, robot, self._on_estop, self._release_refused)
         self.holder = Holder(robot, "arm", on_change=self.driver.set_controller)
         self.holder.follow(bus)
         self.not_holder = 0
@@ -75,10 +75,11 @@ class ArmDriverService(Service):
 
     # ------------------------------------------------------------ in
     def _on_command(self, key: str, cmd: ArmCommand) -> None:
-        refused = self.holder.refusal(cmd.controller)
+        refused = self.holder.refusal(cmd)
         if refused is not None:     # not the holder's: noted for re-arming, never obeyed
             self.not_holder += 1
-            self.driver.heard(cmd.controller)
+            if isinstance(refused, NotHolder):   # a forged one says nothing of the holder's stream
+                self.driver.heard(cmd.controller)
             self._refuse_command(key, refused)
             return
         try:
@@ -98,7 +99,10 @@ class ArmDriverService(Service):
                              reason=f"arm:{refusal_reason(exc)}")
 
     def _on_estop(self, msg: EStop) -> None:
-        self.driver.set_estop(msg.engaged, msg.reason, msg.by)
+        self.driver.set_estop(msg.engaged, msg.reason, estop.named(msg))
+
+    def _release_refused(self, msg: EStop, why: str) -> None:
+        self._refusals.event("warning", "release_refused", estop.refused_text(msg, why), reason="estop:release")
 
     def _status(self, request: dict) -> dict:
         return {"robot": self.robot, **holders_status([self.holder]), **self.driver.status()}

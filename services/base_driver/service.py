@@ -12,13 +12,13 @@ import logging
 import math
 import os
 
-from asibot import keys
+from asibot import estop, keys
 from asibot.arming import NotReady
 from asibot.bus import Bus
 from asibot.estop import EStopState
 from asibot.events import CommandRefused, EventThrottle, refusal_reason
 from asibot.messages import Battery, Bumpers, EStop, Event, Odometry, Sonar, Twist
-from asibot.ownership import Holder, holders_status
+from asibot.ownership import Holder, NotHolder, holders_status
 from asibot.runtime import Service
 
 from asibot.base_driver.driver import DEFAULT_MAX_VX, DEFAULT_MAX_WZ, BaseDriver
@@ -49,7 +49,7 @@ class BaseDriverService(Service):
                                  baud=baud, params=KNOWN[params] if params else None,
                                  max_vx=max_vx, max_wz=max_wz)
         self._angles: list[float] = []
-        self.estop = EStopState(bus, robot, self._on_estop)
+        self.estop = EStopState(bus, robot, self._on_estop, self._release_refused)
         self.holder = Holder(robot, "base", on_change=self.driver.set_controller)
         self.holder.follow(bus)
         self.not_holder = 0
@@ -62,10 +62,11 @@ class BaseDriverService(Service):
 
     # ------------------------------------------------------------ in
     def _on_cmd_vel(self, key: str, msg: Twist) -> None:
-        refused = self.holder.refusal(msg.controller)
+        refused = self.holder.refusal(msg)
         if refused is not None:     # not the holder's: noted for re-arming, never obeyed
             self.not_holder += 1
-            self.driver.heard(msg.controller)
+            if isinstance(refused, NotHolder):   # a forged one says nothing of the holder's stream
+                self.driver.heard(msg.controller)
             self._refuse_command(key, refused)
             return
         try:
@@ -85,7 +86,10 @@ class BaseDriverService(Service):
                              reason=f"cmd_vel:{refusal_reason(exc)}")
 
     def _on_estop(self, msg: EStop) -> None:
-        self.driver.set_estop(msg.engaged, msg.reason, msg.by)
+        self.driver.set_estop(msg.engaged, msg.reason, estop.named(msg))
+
+    def _release_refused(self, msg: EStop, why: str) -> None:
+        self._refusals.event("warning", "release_refused", estop.refused_text(msg, why), reason="estop:release")
 
     def _status(self, request: dict) -> dict:
         return {"robot": self.robot, **holders_status([self.holder]), **self.driver.status()}

@@ -68,8 +68,9 @@ class KinematicsServer(Service):
         self.bus, self.robot, self.model, self.spec = bus, robot, model, spec
         self.rate, self.clock = rate, clock
         self.ctl = Controller(model, spec, started=clock())
-        #: This controller's identity, in every command it sends (asibot.ownership).
-        self.controller = ownership.new_id("kinematics")
+        #: This controller's identity, which signs every command it sends (asibot.ownership).
+        self.me = ownership.Controller(robot, "arm", "kinematics")
+        self.controller = self.me.id
         self.n = len(spec.joint_names)
         self._stop = threading.Event()
         self.ticker = Ticker(rate, stop=self._stop)
@@ -90,7 +91,7 @@ class KinematicsServer(Service):
         self.verbs = requests.verbs(self.n)
         for verb, spec in self.verbs.items():
             bus.serve(keys.cart_rpc(robot, verb), self._handler(verb, spec, getattr(self, verb)))
-        bus.announce(keys.controller_alive(robot, self.controller))
+        self.me.announce(bus)
         self._loop = threading.Thread(target=self._run, name="control-loop", daemon=True)
         self._loop.start()
 
@@ -133,8 +134,8 @@ class KinematicsServer(Service):
         """One control step: the reference for now, if any, goes to the driver."""
         ref = self.ctl.tick(self.clock())
         if ref is not None and self.ctl.driver_alive:
-            self.cmd_pub.put(ArmCommand(mode="position", values=ref.positions, velocities=ref.velocities,
-                                        controller=self.controller))
+            self.me.put(self.cmd_pub, ArmCommand(mode="position", values=ref.positions,
+                                                 velocities=ref.velocities))
 
     def _run(self) -> None:
         every = max(1, int(round(self.rate / STATE_RATE)))
@@ -271,7 +272,7 @@ class KinematicsServer(Service):
                                               "gripper, or is not running.")
             before = self._grip
         opening = float(self.spec.gripper_max_opening) if a.action == "open" else 0.0
-        self.grip_pub.put(GripperCommand(opening=opening, controller=self.controller))
+        self.me.put(self.grip_pub, GripperCommand(opening=opening))
         state = self._gripper_settled(opening, before)
         return {"opening": state.opening, "holding": state.holding}
 

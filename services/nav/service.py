@@ -27,7 +27,7 @@ from typing import Callable
 
 import numpy as np
 
-from asibot import keys, ownership
+from asibot import identity, keys, ownership
 from asibot import messages as m
 from asibot.bus import Bus
 from asibot.errors import RpcError, arguments as _only, quote
@@ -75,7 +75,8 @@ class NavService(Service):
         self._pub_path = bus.publisher(keys.nav_path(robot), m.NavPath)
         self._pub_status = bus.publisher(keys.nav_status(robot), m.NavStatus)
         self._pub_event = bus.publisher(keys.events(robot), m.Event)
-        self.controller = ownership.announce(bus, robot, "base", "nav")
+        self.me = ownership.announce(bus, robot, "base", "nav")
+        self.controller = self.me.id
         self.holder = ownership.Holder(robot, "base")
         self.holder.follow(bus)
         #: Before the first motion for each driver: wait until it names us the holder.
@@ -154,7 +155,7 @@ class NavService(Service):
 
     def _send(self, vx: float, wz: float) -> None:
         self.commands += 1
-        self._pub_cmd.put(m.Twist(vx=float(vx), wz=float(wz), controller=self.controller))
+        self.me.put(self._pub_cmd, m.Twist(vx=float(vx), wz=float(wz)))
 
     def _publish_path(self, path: PlannedPath | None) -> None:
         gid = self.pilot.status().goal_id or 0
@@ -189,7 +190,7 @@ class NavService(Service):
             stop = req.get("name") == "stop"      # never delayed (the bus passes maps only)
             holder = self.holder.current
             if verb in DRIVING_VERBS and not stop and holder not in (None, self.controller):
-                raise RpcError("busy", f"Another program drives the base of {self.robot} ({holder}); "
+                raise RpcError("busy", f"Another program drives the base of {self.robot} ({identity.short(holder)}); "
                                        "stop it first.")
             if verb in MOTION_VERBS and not stop:
                 self.hold.wait(time.monotonic() + HOLD_GRACE)

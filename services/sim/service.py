@@ -16,16 +16,17 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import mujoco
 
-from asibot import keys
+from asibot import estop, keys
 from asibot import messages as m
 from asibot.bus import Bus
 from asibot.errors import MessageError, RpcError
 from asibot.estop import EStopState
 from asibot.events import CommandRefused, EventThrottle, refusal_reason
-from asibot.ownership import Holder, holders_status
+from asibot.ownership import Holder, NotHolder, holders_status
 from asibot.runtime import Service
 from asibot.sim import viewer
 from asibot.sim.arm import CommandRejected, Notice
@@ -93,7 +94,7 @@ class SimService(Service):
         if sim.base:
             bus.subscribe(keys.base_cmd_vel(rid), m.Twist, self._on_cmd_vel,
                           on_reject=lambda k, exc: self._malformed("cmd_vel", k, exc))
-        self.estop = EStopState(bus, rid, self._on_estop)
+        self.estop = EStopState(bus, rid, self._on_estop, self._release_refused)
         for verb, handler in {"status": self._rpc_status, "reset_fault": self._rpc_reset_fault,
                               "reset_world": self._rpc_reset_world,
                               "set_object_pose": self._rpc_set_object_pose,
@@ -136,20 +137,21 @@ class SimService(Service):
         else:
             self._reject(topic, exc.reason, f"{self.WHO[topic]}: {exc}")
 
-    def _holds(self, topic: str, controller: str) -> bool:
-        """Whether `controller` holds the part `topic` moves; if not, the command is noted
-        (a stream of the next holder must not move the part at once) and refused."""
+    def _holds(self, topic: str, cmd: Any) -> bool:
+        """Whether the holder of the part `topic` moves sent `cmd`; if not, a command of
+        another controller is noted (a stream of the next holder must not move the part at
+        once), and the command refused."""
         part = self.PART[topic]
-        refused = self.holders[part].refusal(controller)
+        refused = self.holders[part].refusal(cmd)
         if refused is None:
             return True
-        if topic != "gripper":
-            self.sim.heard(part, controller)
+        if topic != "gripper" and isinstance(refused, NotHolder):
+            self.sim.heard(part, cmd.controller)
         self._ignored(topic, refused)
         return False
 
     def _on_arm_command(self, cmd: m.ArmCommand) -> None:
-        if not self._holds("arm", cmd.controller):
+        if not self._holds("arm", cmd):
             return
         try:
             self.sim.command_arm(cmd)
@@ -157,7 +159,7 @@ class SimService(Service):
             self._ignored("arm", exc)
 
     def _on_gripper_command(self, cmd: m.GripperCommand) -> None:
-        if not self._holds("gripper", cmd.controller):
+        if not self._holds("gripper", cmd):
             return
         try:
             self.sim.command_gripper(cmd.opening)
@@ -165,7 +167,7 @@ class SimService(Service):
             self._ignored("gripper", exc)
 
     def _on_cmd_vel(self, cmd: m.Twist) -> None:
-        if not self._holds("cmd_vel", cmd.controller):
+        if not self._holds("cmd_vel", cmd):
             return
         try:
             self.sim.command_base(cmd.vx, cmd.wz, cmd.controller)
@@ -173,7 +175,10 @@ class SimService(Service):
             self._ignored("cmd_vel", exc)
 
     def _on_estop(self, msg: m.EStop) -> None:
-        self.sim.set_estop(msg.engaged, msg.reason, msg.by)
+        self.sim.set_estop(msg.engaged, msg.reason, estop.named(msg))
+
+    def _release_refused(self, msg: m.EStop, why: str) -> None:
+        self._refusals.event("warning", "release_refused", estop.refused_text(msg, why), reason="estop:release")
 
     # ------------------------------------------------------------------ RPC
     def _rpc_status(self, req: dict) -> dict:

@@ -31,12 +31,13 @@ from pathlib import Path
 
 import numpy as np
 
-from asibot import keys, messages, runtime
+from asibot import estop, keys, messages, runtime
 from asibot.files import data_dir, write_atomic
 from asibot.bus import Bus
 from asibot.errors import RpcError, Unavailable, arguments, quote
 from asibot.estop import who
-from asibot.messages import AudioChunk, EStop, Event, VoiceHeard
+from asibot.identity import Identity
+from asibot.messages import AudioChunk, Event, VoiceHeard
 from asibot.voice.audio import AudioFormat, decode, to_16k
 from asibot.voice.commands import STOP, Commands, Outcome, Stopped, Transcript
 from asibot.voice.errors import GrammarError
@@ -68,6 +69,7 @@ class BusRobots:
 
     def __init__(self, bus: Bus, robot: str, timeout: float = CALL_TIMEOUT) -> None:
         self.bus, self.robot, self.timeout = bus, robot, timeout
+        self.me = Identity("voice")     # signs its estops (asibot.estop)
         self._lock = threading.Lock()
         self._live: set[str] = set()
         bus.watch(keys.ALL_DRIVERS, self._on_driver)
@@ -91,8 +93,7 @@ class BusRobots:
     def stop(self) -> Stopped:
         robots = self.live()
         for robot in robots:
-            self.bus.latch(keys.estop(robot), EStop(engaged=True, reason='"stop" said to the voice service',
-                                                    by=who("voice")))
+            estop.latch(self.bus, robot, self.me, True, '"stop" said to the voice service', who("voice"))
         problems = []
         try:
             self.bus.call(keys.tasks_rpc("stop"), timeout=self.timeout)

@@ -13,11 +13,11 @@ import threading
 from dataclasses import dataclass
 from typing import Any, Sequence
 
-from asibot import keys, robots
+from asibot import estop, keys, robots
 from asibot.bus import Bus
 from asibot.errors import RpcError
 from asibot.estop import who
-from asibot.messages import EStop
+from asibot.identity import Identity
 from asibot.poses import POINT_AXES
 from asibot.web.pointer import DeviceReading, PointerMapping
 
@@ -77,6 +77,7 @@ class Motion:
         self.settings = settings
         self.pointer = pointer or PointerMapping()
         self.who = who
+        self.me = Identity("web")      # signs the page's estops and releases (asibot.estop)
         self._lock = threading.Lock()
         self._steps: dict[str, tuple[str, list[float]]] = {}   # robot -> the last step's target
 
@@ -211,12 +212,12 @@ class Motion:
     # --- safety ---------------------------------------------------------------------------
     def estop(self, robot: str) -> None:
         """Engage the robot's emergency stop (latched: it holds after this server exits)."""
-        self.bus.latch(keys.estop(robot), EStop(engaged=True, reason=f"emergency stop from the {self.who}",
-                                                by=who(f"the {self.who}", login_of=self.bus.name)))
+        estop.latch(self.bus, robot, self.me, True, f"emergency stop from the {self.who}",
+                    who(f"the {self.who}", login_of=self.bus.name))
 
     def release(self, robot: str) -> None:
-        self.bus.latch(keys.estop(robot), EStop(engaged=False, reason=f"released from the {self.who}",
-                                                by=who(f"the {self.who}", login_of=self.bus.name)))
+        estop.latch(self.bus, robot, self.me, False, f"released from the {self.who}",
+                    who(f"the {self.who}", login_of=self.bus.name))
 
     def reset_fault(self, robot: str) -> dict:
         return self.bus.call(keys.driver_rpc(robot, "reset_fault"), timeout=CALL_TIMEOUT)

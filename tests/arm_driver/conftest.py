@@ -134,7 +134,7 @@ class ArmOnBus:
     user: Bus
     states: Inbox
     events: Inbox
-    controller: str
+    controller: ownership.Controller
     controller_bus: Bus
 
     def codes(self) -> list[str]:
@@ -153,7 +153,7 @@ def arm(memory_bus):
     controller = ownership.announce(controller_bus, R, "arm", "test")
     try:
         wait_until(lambda: len(states) and states.last().mode == "idle", 15, message="the arm driver did not start")
-        wait_until(lambda: svc.holder.current == controller, 5, message="the driver never saw the controller")
+        wait_until(lambda: svc.holder.current == controller.id, 5, message="the driver never saw the controller")
         yield ArmOnBus(svc, user, states, events, controller, controller_bus)
     finally:
         controller_bus.close()

@@ -10,10 +10,10 @@ import time
 
 import pytest
 
-from asibot import keys, messages
+from asibot import keys
 from asibot.events import stands_for
 from asibot.messages import ArmCommand, Event
-from asibot.testing import Inbox, wait_until
+from asibot.testing import Inbox, wait_until, signed_raw
 
 from .conftest import R
 
@@ -55,7 +55,7 @@ def assert_still(svc, states: Inbox, before: list[float], n: int = 30) -> None:
 def test_a_command_beyond_the_limits_is_refused_with_an_event_and_nothing_moves(arm, payload, says):
     svc, user, states, events = arm.svc, arm.user, arm.states, arm.events
     before = states.last().positions
-    user.put_raw(keys.arm_command(R), messages.pack({**payload, "controller": arm.controller}))
+    user.put_raw(keys.arm_command(R), signed_raw(arm.controller, ArmCommand, payload))
     wait_until(lambda: refusals(events), 5, message="no bad_command event")
     event = refusals(events)[0]
     assert event.level == "error"
@@ -68,9 +68,9 @@ def test_a_command_beyond_the_limits_is_refused_with_an_event_and_nothing_moves(
 def test_a_refused_command_does_not_interrupt_the_motion_under_way(arm):
     states, events, c = arm.states, arm.events, arm.controller
     cmd = arm.user.publisher(keys.arm_command(R), ArmCommand)
-    cmd.put(ArmCommand(mode="position", values=[0.3, 0.0, 0.0, 0.0, 0.0], controller=c))   # 0.7 s at 25 deg/s
+    c.put(cmd, ArmCommand(mode="position", values=[0.3, 0.0, 0.0, 0.0, 0.0]))   # 0.7 s at 25 deg/s
     wait_until(lambda: states.last().velocities[0] > 0.1, 5)
-    cmd.put(ArmCommand(mode="position", values=[1e300] * 5, controller=c))
+    c.put(cmd, ArmCommand(mode="position", values=[1e300] * 5))
     wait_until(lambda: refusals(events), 5)
     assert states.last().positions[0] < 0.3 and states.last().mode == "position"
     wait_until(lambda: abs(states.last().positions[0] - 0.3) < 1e-4, 5, message="the motion stopped")
@@ -86,7 +86,7 @@ def test_the_planners_noise_at_a_limit_is_not_refused(arm):
     svc.driver.ref.vmax = [v * 20 for v in svc.driver.ref.vmax]       # get to the limit quickly
     svc.emulator.drives[2].max_speed_counts *= 20
     cmd = arm.user.publisher(keys.arm_command(R), ArmCommand)
-    cmd.put(ArmCommand(mode="position", values=[0.0, Q2_UPPER + 5e-6, 0.0, 0.0, 0.0], controller=arm.controller))
+    arm.controller.put(cmd, ArmCommand(mode="position", values=[0.0, Q2_UPPER + 5e-6, 0.0, 0.0, 0.0]))
     wait_until(lambda: abs(states.last().positions[1] - Q2_UPPER) < 1e-4, 5)
     start = len(states)
     wait_until(lambda: len(states) >= start + 20, 5)
@@ -100,7 +100,7 @@ def test_a_burst_of_300_bad_commands_gives_one_event_a_second_with_the_count(arm
     cmd = arm.user.publisher(keys.arm_command(R), ArmCommand)
     t0 = time.monotonic()
     for i in range(300):        # every one different, as a fuzzer sends them
-        cmd.put(ArmCommand(mode="position", values=[10.0 + i, 0.0, 0.0, 0.0, 0.0], controller=arm.controller))
+        arm.controller.put(cmd, ArmCommand(mode="position", values=[10.0 + i, 0.0, 0.0, 0.0, 0.0]))
     sent_in = time.monotonic() - t0
 
     def accounted() -> int:

@@ -10,11 +10,11 @@ import time
 
 import pytest
 
-from asibot import keys, messages, ownership
+from asibot import keys, ownership
 from asibot.bus import Bus
 from asibot.errors import RpcError
 from asibot.messages import ArmCommand, ArmState, EStop, Event
-from asibot.testing import wait_until
+from asibot.testing import wait_until, release, signed_raw
 
 R = "asibot"
 
@@ -52,17 +52,16 @@ def test_driver_contract_end_to_end(driver_process):
     # controller that holds the arm (asibot.ownership).
     controller = Bus("fake-controller", wait=5)
     c = ownership.announce(controller, R, "arm", "test")
-    wait_until(lambda: bus.call(keys.driver_rpc(R, "status"))["holders"]["arm"] == c, 5)
+    wait_until(lambda: bus.call(keys.driver_rpc(R, "status"))["holders"]["arm"] == c.id, 5)
     cmd = bus.publisher(keys.arm_command(R), ArmCommand)
     assert cmd.wait_for_subscribers(5)
     goal = [0.03, -0.02, 0.01, 0.0, 0.02]
-    cmd.put(ArmCommand(mode="position", values=goal, controller=c))
+    c.put(cmd, ArmCommand(mode="position", values=goal))
     wait_until(lambda: all(abs(p - g) < 1e-4 for p, g in zip(states[-1].positions, goal)), 5)
 
     # A command with the wrong number of joints, or a NaN, is rejected with an Event.
-    cmd.put(ArmCommand(mode="position", values=[0.5, 0.5], controller=c))
-    bus.put_raw(keys.arm_command(R), messages.pack({"mode": "position", "values": [math.nan, 0, 0, 0, 0],
-                                                    "controller": c}))
+    c.put(cmd, ArmCommand(mode="position", values=[0.5, 0.5]))
+    bus.put_raw(keys.arm_command(R), signed_raw(c, ArmCommand, {"mode": "position", "values": [math.nan, 0, 0, 0, 0]}))
     wait_until(lambda: sum(e.code == "bad_command" for e in events) >= 2, 3)
     time.sleep(0.1)
     assert all(abs(p - g) < 1e-4 for p, g in zip(states[-1].positions, goal))
@@ -70,10 +69,10 @@ def test_driver_contract_end_to_end(driver_process):
     # Estop (latched) holds and ignores commands; released, commands work again.
     bus.latch(keys.estop(R), EStop(engaged=True, reason="test"))
     wait_until(lambda: any(e.code == "estop" for e in events), 3)
-    cmd.put(ArmCommand(mode="position", values=[0.2] * 5, controller=c))
+    c.put(cmd, ArmCommand(mode="position", values=[0.2] * 5))
     time.sleep(0.2)
     assert all(abs(p - g) < 1e-4 for p, g in zip(states[-1].positions, goal))
-    bus.latch(keys.estop(R), EStop(engaged=False))
+    release(bus, R)
     wait_until(lambda: any(e.code == "estop_released" for e in events), 3)
 
     # Over-current through the emulated bus: fault on arm/state and an Event; reset by RPC.
@@ -104,7 +103,7 @@ def test_driver_contract_end_to_end(driver_process):
     assert states[-1].positions[2] == pytest.approx(here, abs=math.radians(360 / 4096))
 
     # The controller's liveliness vanishing mid-motion stops the arm.
-    cmd.put(ArmCommand(mode="position", values=[1.0, 0, 0, 0, 0], controller=c))
+    c.put(cmd, ArmCommand(mode="position", values=[1.0, 0, 0, 0, 0]))
     wait_until(lambda: states[-1].velocities[0] > 0.1, 3)
     controller.close()
     wait_until(lambda: any(e.code == "controller_lost" for e in events), 3)

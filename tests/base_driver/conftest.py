@@ -76,7 +76,7 @@ class BaseOnBus:
     odom: Inbox
     events: Inbox
     emulator: ArcosEmulator
-    controller: str
+    controller: ownership.Controller
     controller_bus: Bus
 
     def codes(self) -> list[str]:
@@ -94,7 +94,7 @@ def base(memory_bus, emulator):
     controller = ownership.announce(controller_bus, ROBOT, "base", "test")
     try:
         wait_until(lambda: svc.driver.connected and len(odom), 5, message="no odometry on the bus")
-        wait_until(lambda: svc.holder.current == controller, 5, message="the driver never saw the controller")
+        wait_until(lambda: svc.holder.current == controller.id, 5, message="the driver never saw the controller")
         yield BaseOnBus(svc, user, odom, events, emulator, controller, controller_bus)
     finally:
         controller_bus.close()

@@ -13,7 +13,7 @@ import pytest
 from asibot import keys, messages
 from asibot.events import stands_for
 from asibot.messages import Event, Twist
-from asibot.testing import Inbox, wait_until
+from asibot.testing import Inbox, wait_until, signed_raw
 
 from .conftest import ROBOT
 
@@ -40,7 +40,7 @@ def assert_still(odom: Inbox, emulator, n: int = 5) -> None:
 ])
 def test_a_cmd_vel_beyond_the_limits_is_refused_with_an_event_and_nothing_moves(base, payload, says):
     svc, user, odom, events, emu = base.svc, base.user, base.odom, base.events, base.emulator
-    user.put_raw(keys.base_cmd_vel(ROBOT), messages.pack({**payload, "controller": base.controller}))
+    user.put_raw(keys.base_cmd_vel(ROBOT), signed_raw(base.controller, Twist, payload))
     wait_until(lambda: refusals(events), 5, message="no bad_command event")
     event = refusals(events)[0]
     assert event.level == "error"
@@ -55,7 +55,7 @@ def test_a_burst_of_300_bad_cmd_vel_gives_one_event_a_second_with_the_count(base
     pub = user.publisher(keys.base_cmd_vel(ROBOT), Twist)
     t0 = time.monotonic()
     for i in range(300):
-        pub.put(Twist(vx=1.0 + i, wz=0.0, controller=base.controller))
+        base.controller.put(pub, Twist(vx=1.0 + i, wz=0.0))
     sent_in = time.monotonic() - t0
 
     def accounted() -> int:
@@ -73,7 +73,7 @@ def test_a_different_mistake_is_reported_at_once(base):
     user, events = base.user, base.events
     pub = user.publisher(keys.base_cmd_vel(ROBOT), Twist)
     for _ in range(5):
-        pub.put(Twist(vx=3.0, wz=0.0, controller=base.controller))
+        base.controller.put(pub, Twist(vx=3.0, wz=0.0))
     user.put_raw(keys.base_cmd_vel(ROBOT), messages.pack({"vx": "fast", "wz": 0.0}))
     wait_until(lambda: len(refusals(events)) >= 2, 0.9, message="the second kind of mistake was held back")
     assert "vx 3 m/s" in refusals(events)[0].text and "Twist.vx" in refusals(events)[1].text

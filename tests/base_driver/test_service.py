@@ -18,7 +18,7 @@ from asibot import keys, ownership
 from asibot.bus import Bus
 from asibot.errors import RpcError
 from asibot.messages import Battery, Bumpers, EStop, Event, Odometry, Sonar, Twist
-from asibot.testing import free_port, wait_until
+from asibot.testing import free_port, wait_until, release
 
 from asibot.base_driver.service import BaseDriverService
 
@@ -54,7 +54,7 @@ def world(memory_bus, emulator):
     controller = ownership.announce(user, ROBOT, "base", "test")   # the test drives the base
     inbox = Inbox(user)
     wait_until(lambda: svc.driver.connected and inbox["odom"], 5, message="no odometry on the bus")
-    wait_until(lambda: svc.holder.current == controller, 5)
+    wait_until(lambda: svc.holder.current == controller.id, 5)
     yield svc, user, inbox, emulator, controller
     user.close()
     svc.close()
@@ -66,9 +66,9 @@ def test_cmd_vel_on_the_bus_moves_the_emulated_pioneer(world):
     pub = user.publisher(keys.base_cmd_vel(ROBOT), Twist)
     end = time.monotonic() + 1.0
     while time.monotonic() < end:
-        pub.put(Twist(vx=0.3, wz=0.0, controller=controller))
+        controller.put(pub, Twist(vx=0.3, wz=0.0))
         time.sleep(0.05)
-    pub.put(Twist(vx=0.0, wz=0.0, controller=controller))
+    controller.put(pub, Twist(vx=0.0, wz=0.0))
     wait_until(lambda: inbox["odom"][-1].vx == 0.0 and inbox["odom"][-1].x > 0.2, 3)
     assert inbox["odom"][-1].x == pytest.approx(0.3, abs=0.06)
     sonar = inbox["sonar"][-1]
@@ -92,7 +92,7 @@ def test_latched_estop_stops_and_status_reports_it(world):
     svc, user, inbox, emu, controller = world
     user.latch(keys.estop(ROBOT), EStop(engaged=True, reason="test button"))
     wait_until(lambda: "estop" in inbox.codes(), 3)
-    user.publisher(keys.base_cmd_vel(ROBOT), Twist).put(Twist(vx=0.3, wz=0.0, controller=controller))
+    controller.put(user.publisher(keys.base_cmd_vel(ROBOT), Twist), Twist(vx=0.3, wz=0.0))
     time.sleep(0.3)
     assert emu.robot.target_vel == 0
     status = user.call(keys.driver_rpc(ROBOT, "status"), {}, timeout=2.0)
@@ -100,7 +100,7 @@ def test_latched_estop_stops_and_status_reports_it(world):
     with pytest.raises(RpcError) as err:
         user.call(keys.driver_rpc(ROBOT, "reset_fault"), {}, timeout=2.0)
     assert err.value.code == "estop"
-    user.latch(keys.estop(ROBOT), EStop(engaged=False))
+    release(user, ROBOT)
     wait_until(lambda: "estop_released" in inbox.codes(), 3)
     assert user.call(keys.driver_rpc(ROBOT, "reset_fault"), {}, timeout=2.0)["ok"]
 
@@ -142,11 +142,11 @@ def test_standalone_processes_emulator_and_driver(router, tmp_path):
         controller = ownership.announce(user, ROBOT, "base", "test")
         inbox = Inbox(user)
         wait_until(lambda: inbox["odom"], 15, message="the driver process published no odometry")
-        wait_until(lambda: user.call(keys.driver_rpc(ROBOT, "status"))["holders"]["base"] == controller, 5)
+        wait_until(lambda: user.call(keys.driver_rpc(ROBOT, "status"))["holders"]["base"] == controller.id, 5)
         pub = user.publisher(keys.base_cmd_vel(ROBOT), Twist)
         end = time.monotonic() + 1.0
         while time.monotonic() < end:
-            pub.put(Twist(vx=0.2, wz=0.0, controller=controller))
+            controller.put(pub, Twist(vx=0.2, wz=0.0))
             time.sleep(0.05)
         wait_until(lambda: inbox["odom"][-1].x > 0.1, 3)
 

@@ -11,7 +11,7 @@ import pytest
 from asibot import keys, messages as m
 from asibot.bus import Bus
 from asibot.errors import RpcError
-from asibot.testing import free_port, wait_until
+from asibot.testing import free_port, wait_until, release
 
 
 @pytest.fixture
@@ -104,7 +104,7 @@ def test_latched_value_reaches_late_joiners(bus, router):
         late.subscribe(keys.estop("r3"), m.EStop, got.append, latest=True)
         wait_until(lambda: got, 3)
         assert got[0].engaged and got[0].reason == "pressed"
-        bus.latch(keys.estop("r3"), m.EStop(engaged=False))
+        release(bus, "r3")
         wait_until(lambda: len(got) == 2 and not got[-1].engaged, 3)
 
 

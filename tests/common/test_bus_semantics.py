@@ -14,7 +14,7 @@ from asibot import keys, messages as m
 from asibot.bus import Bus
 from asibot.bus.memory import intersects
 from asibot.errors import RpcError
-from asibot.testing import wait_until
+from asibot.testing import wait_until, release
 
 
 @pytest.fixture(params=["zenoh", "memory"])
@@ -148,7 +148,7 @@ def test_latched_values_reach_late_joiners_and_the_newest_wins(endpoint):
     with Bus("web", endpoint) as web, Bus("panel", endpoint) as panel, Bus("late", endpoint) as late:
         web.latch(keys.estop("r8"), m.EStop(engaged=True, reason="web"))
         time.sleep(0.01)
-        panel.latch(keys.estop("r8"), m.EStop(engaged=False, reason="released at the panel"))
+        release(panel, "r8", reason="released at the panel")
         wait_until(lambda: len([x for x in late._get(keys.estop("r8"), b"", 0.5) if x]) == 2, 3)
         got = []
         late.subscribe(keys.estop("r8"), m.EStop, got.append, latest=True)

@@ -1,9 +1,12 @@
 """asibot.estop: the latched estop outlives whoever engaged it, since every process that obeys
 it keeps serving it; a restarted driver learns it from the controller."""
 
-from asibot import keys
+import dataclasses
+
+from asibot import estop, identity, keys
 from asibot.bus import Bus
 from asibot.estop import EStopState, who
+from asibot.identity import Identity
 from asibot.messages import EStop
 from asibot.testing import Inbox, wait_until
 
@@ -61,3 +64,38 @@ def test_the_newest_state_wins_and_an_older_one_is_ignored(memory_bus):
 def test_who_names_the_user_the_program_and_the_process():
     text = who("asibot release")
     assert "@" in text and "(asibot release, pid " in text
+
+
+def test_a_release_counts_only_signed_and_names_the_key_that_signed_it(memory_bus):
+    with Bus("driver") as driver_bus, Bus("ui") as ui, Bus("stranger") as stranger:
+        seen, refused = Inbox(), Inbox()
+        state = EStopState(driver_bus, R, seen, on_refused=lambda msg, why: refused((msg, why)))
+        engage = estop.latch(ui, R, Identity("web"), True, "test", "ana@home (web, pid 1)")
+        wait_until(lambda: state.engaged, 2)
+        # Unsigned, or signed in another's name by a key that is not its: ignored, and said.
+        stranger.latch(keys.estop(R), EStop(engaged=False, reason="anonymous", by="ana@home (web, pid 1)"))
+        wait_until(lambda: len(refused) == 1, 2)
+        nurse = Identity("web")
+        borrowed = dataclasses.replace(estop.latch(stranger, "elsewhere", Identity("x"), False, "x", "bob"),
+                                       signer=nurse.id)
+        stranger.latch(keys.estop(R), borrowed)
+        wait_until(lambda: len(refused) == 2, 2)
+        # Signed for another robot: not a release of this one.
+        stranger.latch(keys.estop(R), estop.latch(stranger, "elsewhere", nurse, False, "x", "bob"))
+        wait_until(lambda: len(refused) == 3, 2)
+        assert state.engaged and [m.stamp for m in seen.all()] == [engage.stamp]
+        msg, why = refused.all()[0]
+        assert why == "it is not signed"
+        assert "ana@home (web, pid 1), unsigned" in estop.refused_text(msg, why)
+        assert "is not" in refused.all()[1][1] and "elsewhere" not in refused.all()[1][1]
+        release = estop.latch(ui, R, nurse, False, "released", "bob@home (asibot release, pid 2)")
+        wait_until(lambda: not state.engaged, 2)
+        assert estop.named(release) == f"bob@home (asibot release, pid 2), key {identity.short(nurse.id)}"
+        assert estop.named(EStop(engaged=True)) == ""
+
+
+def test_an_unsigned_engage_still_stops(memory_bus):
+    with Bus("driver") as driver_bus, Bus("button") as button:
+        state = EStopState(driver_bus, R, lambda msg: None)
+        button.latch(keys.estop(R), EStop(engaged=True, reason="a panel that cannot sign"))
+        wait_until(lambda: state.engaged, 2)

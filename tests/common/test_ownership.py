@@ -1,11 +1,14 @@
 """asibot.ownership: which controller holds a part of a robot, from the liveliness tokens."""
 
+import dataclasses
 import time
 
 import pytest
 
-from asibot import keys, ownership
+from asibot import identity, keys, ownership
 from asibot.bus import Bus
+from asibot.identity import Identity
+from asibot.messages import ArmCommand, GripperCommand, Twist
 from asibot.testing import wait_until
 
 
@@ -22,34 +25,88 @@ def test_controller_keys_name_the_controller_and_parse_back():
         keys.controller_alive("asibot", "a/b")
 
 
-def test_ids_are_new_at_every_start_and_valid_key_chunks():
-    a, b = ownership.new_id("kinematics"), ownership.new_id("kinematics")
-    assert a != b and a.startswith("kinematics-")
-    keys.controller_alive("r", a)
+def test_ids_are_new_at_every_start_carry_a_key_and_are_valid_key_chunks():
+    a, b = ownership.Controller("r", "arm", "kinematics"), ownership.Controller("r", "arm", "kinematics")
+    assert a.id != b.id and a.id.startswith("kinematics-")
+    assert identity.public_key(a.id) is not None
+    keys.controller_alive("r", a.id)
+    with pytest.raises(ValueError, match="part must be one of arm, base"):
+        ownership.Controller("r", "wheel")
+
+
+def alive(*controllers) -> ownership.Holder:
+    h = ownership.Holder("asibot", "arm")
+    for c in controllers:
+        h.update(keys.controller_alive("asibot", c.id), True)
+    return h
 
 
 def test_the_first_controller_alive_holds_until_it_vanishes_then_the_next_oldest():
     changes = []
     h = ownership.Holder("asibot", "arm", on_change=changes.append)
-    key = lambda c: keys.controller_alive("asibot", c)  # noqa: E731
-    assert h.current is None and h.refusal("a") is not None
-    h.update(key("a"), True)
-    h.update(key("b"), True)
-    h.update(key("a"), True)                   # a token seen twice (alive() then watch())
-    assert h.current == "a" and h.alive == ["a", "b"] and h.refusal("a") is None
-    refused = h.refusal("b")
+    a, b, c = (ownership.Controller("asibot", "arm", n) for n in "abc")
+    key = lambda c: keys.controller_alive("asibot", c.id)  # noqa: E731
+    assert h.current is None and h.refusal(a.sign(Twist(vx=0.0, wz=0.0))) is not None
+    h.update(key(a), True)
+    h.update(key(b), True)
+    h.update(key(a), True)                   # a token seen twice (alive() then watch())
+    assert h.current == a.id and h.alive == [a.id, b.id]
+    assert h.refusal(a.sign(GripperCommand(opening=0.01))) is None
+    refused = h.refusal(b.sign(GripperCommand(opening=0.01)))
     assert refused.reason == "not_holder" and refused.code == "not_holder"
-    assert "came from controller 'b', and controller 'a' holds the arm of asibot" in str(refused)
-    assert "without a controller identity" in str(h.refusal(""))
-    h.update(key("b"), False)                  # not the holder: nothing changes
-    h.update(key("c"), True)
-    h.update(key("a"), False)
-    assert h.current == "c" and changes == ["a", "c"]
-    h.update(key("c"), False)
-    assert h.current is None and changes == ["a", "c", None]
-    assert "no controller holds the arm of asibot" in str(h.refusal("c"))
+    assert f"came from controller {b.id!r}, and controller {a.id!r} holds the arm of asibot" in str(refused)
+    assert "without a controller identity" in str(h.refusal(GripperCommand(opening=0.01)))
+    h.update(key(b), False)                  # not the holder: nothing changes
+    h.update(key(c), True)
+    h.update(key(a), False)
+    assert h.current == c.id and changes == [a.id, c.id]
+    h.update(key(c), False)
+    assert h.current is None and changes == [a.id, c.id, None]
+    assert "no controller holds the arm of asibot" in str(h.refusal(c.sign(GripperCommand(opening=0.01))))
     h.update(keys.base_controller_alive("asibot", "x") + "/extra", True)   # not a controller token
     assert h.current is None
+
+
+def test_a_command_that_borrows_the_holders_id_is_refused():
+    holder, stranger = ownership.Controller("asibot", "arm", "kinematics"), Identity("kinematics")
+    h = alive(holder)
+    cmd = ArmCommand(mode="position", values=[0.5] * 5, controller=holder.id)
+    unsigned = h.refusal(cmd)
+    assert unsigned.code == "not_signed" and "it is not signed" in str(unsigned)
+    # Signed by another key, in the holder's name: what a process that read the token can do.
+    forged = dataclasses.replace(stranger.sign(cmd, "asibot/arm"), controller=holder.id)
+    assert h.refusal(forged).code == "not_signed"
+    # The holder's own signature, with a field changed after it signed.
+    signed = holder.sign(cmd)
+    assert h.refusal(dataclasses.replace(signed, values=[1.5] * 5)).code == "not_signed"
+    # Signed for another robot or part: not valid here.
+    elsewhere = ownership.Controller("kitchen", "arm", "kinematics")
+    moved = dataclasses.replace(elsewhere.sign(cmd), controller=holder.id)
+    assert h.refusal(moved).code == "not_signed"
+    assert h.refusal(signed) is None
+
+
+def test_a_command_played_again_is_refused_and_each_type_counts_apart():
+    holder = ownership.Controller("asibot", "arm", "kinematics")
+    h = alive(holder)
+    first, grip, second = (holder.sign(ArmCommand(mode="position", values=[0.1] * 5)),
+                           holder.sign(GripperCommand(opening=0.02)),
+                           holder.sign(ArmCommand(mode="position", values=[0.2] * 5)))
+    assert h.refusal(second) is None
+    assert h.refusal(grip) is None                       # older than `second`, but a gripper command
+    again = h.refusal(second)
+    assert again.code == "replayed" and "a copy played again" in str(again)
+    assert h.refusal(first).code == "replayed"           # recorded earlier, played later
+    # A controller that comes back is a new one: what it obeyed before is forgotten with it.
+    h.update(keys.controller_alive("asibot", holder.id), False)
+    assert not h._obeyed
+
+
+def test_the_senders_id_must_carry_a_key():
+    h = ownership.Holder("asibot", "arm")
+    h.update(keys.controller_alive("asibot", "kinematics-1a2b3c4d"), True)   # an id from before keys
+    refused = h.refusal(ArmCommand(mode="position", values=[0.0] * 5, controller="kinematics-1a2b3c4d"))
+    assert refused.code == "not_signed" and "carries no key" in str(refused)
 
 
 def test_holders_follow_the_bus_and_arm_and_base_are_held_apart(memory_bus):
@@ -59,10 +116,10 @@ def test_holders_follow_the_bus_and_arm_and_base_are_held_apart(memory_bus):
         arm.follow(watcher)                     # one alive before following, one after
         base.follow(watcher)
         n = ownership.announce(nav, "r", "base", "nav")
-        wait_until(lambda: arm.current == k and base.current == n, 2)
+        wait_until(lambda: arm.current == k.id and base.current == n.id, 2)
         kin.close()
         wait_until(lambda: arm.current is None, 2)
-        assert base.current == n
+        assert base.current == n.id
     with pytest.raises(ValueError, match="part must be one of arm, base"):
         ownership.Holder("r", "gripper")
 

@@ -32,7 +32,7 @@ def test_the_emulated_profile_drives_both_robots(up):
     # The base: ARCOS over TCP to the emulated P3-AT, cmd_vel in (from the controller that
     # holds the base: this test, asibot.ownership), odometry out.
     controller = ownership.announce(stack.bus, "pioneer", "base", "test")
-    wait_until(lambda: stack.bus.call(keys.driver_rpc("pioneer", "status"))["holders"]["base"] == controller, 10)
+    wait_until(lambda: stack.bus.call(keys.driver_rpc("pioneer", "status"))["holders"]["base"] == controller.id, 10)
     odom: list[Odometry] = []
     stack.bus.subscribe(keys.base_odom("pioneer"), Odometry, odom.append)
     wait_until(lambda: odom, 10)
@@ -40,7 +40,7 @@ def test_the_emulated_profile_drives_both_robots(up):
     cmd = stack.bus.publisher(keys.base_cmd_vel("pioneer"), Twist)
     end = time.monotonic() + 2.0
     while time.monotonic() < end:
-        cmd.put(Twist(vx=0.3, wz=0.0, controller=controller))
+        controller.put(cmd, Twist(vx=0.3, wz=0.0))
         time.sleep(0.05)
     # The driver's 200 ms watchdog stops the base once the commands end.
     wait_until(lambda: abs(odom[-1].vx) < 1e-3, 5)

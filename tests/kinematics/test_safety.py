@@ -15,7 +15,7 @@ from asibot.client import CartesianClient
 from asibot.errors import RpcError
 from asibot.kinematics.server import KinematicsServer
 from asibot.messages import COMMAND_WATCHDOG_S, EStop
-from asibot.testing import IdealDriver, Stream, wait_until
+from asibot.testing import IdealDriver, Stream, wait_until, release
 
 from .conftest import ROBOT
 from .robot_under_test import asibot_model, asibot_spec
@@ -61,7 +61,7 @@ def test_a_movv_stream_through_an_estop_release_moves_nothing_until_it_pauses(cl
         wait_until(lambda: moving(driver), 3, message="the stream did not move the arm")
         button.latch(keys.estop(ROBOT), EStop(engaged=True, reason="test"))
         wait_until(lambda: client.state()["estop"] and not moving(driver), 3)
-        button.latch(keys.estop(ROBOT), EStop(engaged=False))
+        release(button, ROBOT)
         wait_until(lambda: not client.state()["estop"], 3)
         released = time.monotonic()
         stays_still(driver, 0.6)
@@ -109,7 +109,7 @@ def test_a_planned_move_after_a_recovery_moves_at_once(client):
     try:
         button.latch(keys.estop(ROBOT), EStop(engaged=True, reason="test"))
         wait_until(lambda: client.state()["estop"], 3)
-        button.latch(keys.estop(ROBOT), EStop(engaged=False))
+        release(button, ROBOT)
         wait_until(lambda: not client.state()["estop"], 3)
     finally:
         button.close()

@@ -14,7 +14,7 @@ from asibot import keys, testing
 from asibot.bus import Bus
 from asibot.errors import RpcError
 from asibot.messages import CartState, EStop, Event
-from asibot.testing import wait_until
+from asibot.testing import wait_until, release
 
 from .conftest import ROBOT, build, teardown
 
@@ -140,7 +140,7 @@ def test_estop_refuses_motion_until_released(client):
         with pytest.raises(RpcError) as err:
             client.movj(joints=[10, 0, 0, 0, 0])
         assert err.value.code == "estop"
-        bus.latch(keys.estop(ROBOT), EStop(engaged=False))
+        release(bus, ROBOT)
         assert wait_until(lambda: not client.state()["estop"], timeout=5)
         client.movj(joints=[1, 5, 5, 5, 0], duration=0.3)
         assert client.wait(timeout=5)

@@ -13,7 +13,7 @@ import time
 
 import pytest
 
-from asibot import keys, ownership
+from asibot import identity, keys, ownership
 from asibot import messages as m
 from asibot.bus import Bus
 from asibot.client import NavClient
@@ -91,13 +91,13 @@ def test_while_another_program_holds_the_base_nav_says_so_at_once(memory_bus, ap
 
     def status(req: dict) -> dict:
         asked.append(req)
-        return {"holders": {"base": teleop}}
+        return {"holders": {"base": teleop.id}}
     driver.serve(keys.driver_rpc(ROBOT, "status"), status)
     try:
-        wait_until(lambda: svc.holder.current == teleop, 5)
+        wait_until(lambda: svc.holder.current == teleop.id, 5)
         with NavClient(ROBOT, timeout=10) as nav:
             for move in (lambda: nav.primitive("forward"), lambda: nav.goto("fridge"), lambda: nav.turn(90)):
-                with pytest.raises(RpcError, match=f"Another program drives the base of {ROBOT} \\({teleop}\\)") as err:
+                with pytest.raises(RpcError, match=f"Another program drives the base of {ROBOT} \\({identity.short(teleop.id)}\\)") as err:
                     move()
                 assert err.value.code == "busy"
             assert asked == [], "nav waited for the driver to name it, though another program held the base"

@@ -41,8 +41,8 @@ class SimOnBus:
     arm: Inbox
     odom: Inbox
     events: Inbox
-    arm_controller: str
-    base_controller: str
+    arm_controller: ownership.Controller
+    base_controller: ownership.Controller
     controller_bus: Bus
 
     def __iter__(self):  # svc, user, arm, odom, events = sim
@@ -64,8 +64,8 @@ def sim(memory_bus):
     base_controller = ownership.announce(controller_bus, ROBOT, "base", "test")
     try:
         wait_until(lambda: len(arm) and len(odom), 10, message="the sim published no state")
-        wait_until(lambda: svc.holders["arm"].current == arm_controller
-                   and svc.holders["base"].current == base_controller, 5, message="the sim never saw the controllers")
+        wait_until(lambda: svc.holders["arm"].current == arm_controller.id
+                   and svc.holders["base"].current == base_controller.id, 5, message="the sim never saw the controllers")
         # let the arm settle at home under gravity before measuring stillness
         wait_until(lambda: max(map(abs, arm.last().velocities)) < 1e-3, 10)
         yield SimOnBus(svc, user, arm, odom, events, arm_controller, base_controller, controller_bus)

@@ -14,7 +14,7 @@ import pytest
 from asibot import keys
 from asibot import messages as m
 from asibot.events import stands_for
-from asibot.testing import Inbox, wait_until
+from asibot.testing import Inbox, wait_until, signed_raw
 
 from .conftest import ROBOT
 
@@ -59,7 +59,7 @@ def test_an_arm_command_beyond_the_limits_is_refused_with_an_event_and_nothing_m
         "feed_forward": ({"mode": "position", "values": here, "velocities": [0.0, 0.0, 0.0, 0.0, -1e300]},
                          f"joint {names[4]} velocity feed-forward -1e+300 rad/s is beyond its max speed"),
     }[case]
-    user.put_raw(keys.arm_command(ROBOT), m.pack({**payload, "controller": sim.arm_controller}))
+    user.put_raw(keys.arm_command(ROBOT), signed_raw(sim.arm_controller, m.ArmCommand, payload))
     wait_until(lambda: refusals(events), 5, message="no bad_command event")
     event = refusals(events)[0]
     assert event.level == "error"
@@ -76,7 +76,7 @@ def test_an_arm_command_beyond_the_limits_is_refused_with_an_event_and_nothing_m
 def test_a_cmd_vel_beyond_the_p3at_is_refused_with_an_event_and_nothing_moves(sim, payload, says):
     svc, user, arm, odom, events = sim
     here = list(arm.last().positions)
-    user.put_raw(keys.base_cmd_vel(ROBOT), m.pack({**payload, "controller": sim.base_controller}))
+    user.put_raw(keys.base_cmd_vel(ROBOT), signed_raw(sim.base_controller, m.Twist, payload))
     wait_until(lambda: refusals(events), 5, message="no bad_command event")
     event = refusals(events)[0]
     assert event.text.startswith("Base command refused, the base keeps its previous motion: ")
@@ -93,9 +93,9 @@ def test_a_burst_of_300_bad_commands_gives_one_event_a_second_per_reason(sim):
     t0 = time.monotonic()
     for i in range(300):        # every one different, as a fuzzer sends them; two reasons
         if i % 2:
-            cmd.put(m.ArmCommand(mode="position", values=[1e3 + i] + here[1:], controller=sim.arm_controller))
+            sim.arm_controller.put(cmd, m.ArmCommand(mode="position", values=[1e3 + i] + here[1:]))
         else:
-            drive.put(m.Twist(vx=10.0 + i, wz=0.0, controller=sim.base_controller))
+            sim.base_controller.put(drive, m.Twist(vx=10.0 + i, wz=0.0))
     sent_in = time.monotonic() - t0
 
     def accounted() -> int:

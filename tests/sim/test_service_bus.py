@@ -13,7 +13,7 @@ from asibot import keys, ownership
 from asibot import messages as m
 from asibot.bus import Bus
 from asibot.errors import RpcError
-from asibot.testing import wait_until
+from asibot.testing import wait_until, signed_raw
 
 ROBOT = "pioneer-sim"
 
@@ -65,7 +65,7 @@ def test_the_sim_process_speaks_the_driver_contract(sim_process):
         wait_until(lambda: arm.last() is not None and depth.last() is not None, timeout=10)
         # The test holds the arm and the base (asibot.ownership).
         arm_ctl, base_ctl = (ownership.announce(bus, ROBOT, part, "test") for part in ("arm", "base"))
-        wait_until(lambda: bus.call(keys.driver_rpc(ROBOT, "status"), {})["holders"]["arm"] == arm_ctl, timeout=5)
+        wait_until(lambda: bus.call(keys.driver_rpc(ROBOT, "status"), {})["holders"]["arm"] == arm_ctl.id, timeout=5)
         t1 = time.monotonic()
         time.sleep(1.0)
         assert len(arm.since(t1)) >= 50   # >= 50 Hz by contract; 100 Hz nominal
@@ -77,13 +77,11 @@ def test_the_sim_process_speaks_the_driver_contract(sim_process):
         # a position command is tracked
         goal = (np.array(status["upper"]) * 0 + np.array(arm.last().positions)).tolist()
         goal[0] += 0.2
-        bus.publisher(keys.arm_command(ROBOT), m.ArmCommand).put(m.ArmCommand(mode="position", values=goal,
-                                                                              controller=arm_ctl))
+        arm_ctl.put(bus.publisher(keys.arm_command(ROBOT), m.ArmCommand), m.ArmCommand(mode="position", values=goal))
         wait_until(lambda: abs(arm.last().positions[0] - goal[0]) < 0.01, timeout=10)
 
         # a malformed command is refused with an error event and moves nothing
-        bus.put_raw(keys.arm_command(ROBOT), m.pack({"mode": "position", "values": [1.0, 2.0],
-                                                     "controller": arm_ctl}))
+        bus.put_raw(keys.arm_command(ROBOT), signed_raw(arm_ctl, m.ArmCommand, {"mode": "position", "values": [1.0, 2.0]}))
         wait_until(lambda: any(e.code == "bad_command" for e in events.since(0)), timeout=5)
 
         # a huge position is refused, not clipped: an event names the joint, the value and the
@@ -91,8 +89,7 @@ def test_the_sim_process_speaks_the_driver_contract(sim_process):
         wait_until(lambda: abs(arm.last().positions[0] - goal[0]) < 1e-3
                    and max(map(abs, arm.last().velocities)) < 1e-3, timeout=10)
         here = goal
-        bus.put_raw(keys.arm_command(ROBOT), m.pack({"mode": "position", "values": [1e300] * 5,
-                                                     "controller": arm_ctl}))
+        bus.put_raw(keys.arm_command(ROBOT), signed_raw(arm_ctl, m.ArmCommand, {"mode": "position", "values": [1e300] * 5}))
         wait_until(lambda: any("position 1e+300 rad is beyond its upper limit" in e.text
                                for e in events.since(0)), timeout=5)
         t2 = time.monotonic()
@@ -103,7 +100,7 @@ def test_the_sim_process_speaks_the_driver_contract(sim_process):
         # the base drives, then the latched estop stops it and it ignores further commands
         drive = bus.publisher(keys.base_cmd_vel(ROBOT), m.Twist)
         for _ in range(25):
-            drive.put(m.Twist(vx=0.3, wz=0.0, controller=base_ctl))
+            base_ctl.put(drive, m.Twist(vx=0.3, wz=0.0))
             time.sleep(0.02)
         wait_until(lambda: odom.last().x > 0.05, timeout=5)
         bus.latch(keys.estop(ROBOT), m.EStop(engaged=True, reason="test"))
@@ -111,7 +108,7 @@ def test_the_sim_process_speaks_the_driver_contract(sim_process):
         time.sleep(0.3)
         x_stopped = odom.last().x
         for _ in range(25):
-            drive.put(m.Twist(vx=0.3, wz=0.0, controller=base_ctl))
+            base_ctl.put(drive, m.Twist(vx=0.3, wz=0.0))
             time.sleep(0.02)
         time.sleep(0.3)
         assert odom.last().x == pytest.approx(x_stopped, abs=1e-3)

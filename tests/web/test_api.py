@@ -15,7 +15,7 @@ from asibot import keys
 from asibot import messages as m
 from asibot.bus import Bus
 from asibot.messages import EStop
-from asibot.testing import wait_until
+from asibot.testing import wait_until, release
 
 from .conftest import API_ROBOT as ROBOT, API_START as START, settle
 
@@ -221,7 +221,7 @@ def test_latched_estop_from_elsewhere_shows_on_the_page(web, api):
     try:
         other.latch(keys.estop(ROBOT), EStop(engaged=True, reason="pressed on the robot"))
         wait_until(lambda: svc.fleet.view(ROBOT)["estop"] == {"engaged": True, "reason": "pressed on the robot"}, timeout=5)
-        other.latch(keys.estop(ROBOT), EStop(engaged=False, reason="released"))
+        release(other, ROBOT, reason="released")
         wait_until(lambda: not svc.fleet.view(ROBOT)["estop"]["engaged"], timeout=5)
     finally:
         other.close()
