@@ -125,11 +125,12 @@ def tap_until(page, wanted, limit: int = 80) -> list[str]:
 
 
 def choose(page, name: str) -> None:
-    """Step scanning with one switch: tap to the row holding `name`, hold, tap to it, hold."""
+    """Step scanning with one switch: tap to the group or row holding `name`, hold to open it,
+    and so on down (a group of many controls opens into rows), until the ring is on it; hold."""
     now = tap_until(page, lambda r: name in r)
-    if len(now) > 1:
+    while len(now) > 1:
         hold(page)
-        tap_until(page, lambda r: r == [name])
+        now = tap_until(page, lambda r: name in r)
     hold(page)
 
 

@@ -334,3 +334,22 @@ def test_the_video_tab_shows_the_kitchen_cameras(page):
     screenshot(page, "video")
     page.goto(page.url.split("#")[0] + "#home")     # leaving the tab closes the streams
     assert page.locator(".video img").count() == 0
+
+
+@pytest.mark.parametrize("size", [(1280, 800), (390, 844)], ids=["laptop", "phone"])
+def test_every_tab_shows_its_whole_name_and_the_open_one_is_in_view(browser, kitchen, size):
+    width, height = size
+    page = browser.new_page(viewport={"width": width, "height": height})
+    try:
+        page.goto(kitchen.web_url + "#launcher")
+        tabs = page.locator("#tabs button")
+        tabs.first.wait_for()
+        clipped = page.evaluate("""() => [...document.querySelectorAll('#tabs button')]
+            .filter((b) => b.scrollWidth > b.clientWidth + 1 || b.scrollHeight > b.clientHeight + 1)
+            .map((b) => b.textContent)""")
+        assert clipped == [], f"tabs whose name does not fit: {clipped}"
+        box, bar = page.locator("#tabs button[aria-selected=true]").bounding_box(), page.locator("#tabs").bounding_box()
+        assert bar["x"] <= box["x"] and box["x"] + box["width"] <= bar["x"] + bar["width"] + 1, "the open tab is off screen"
+        screenshot(page, f"tabs-{width}")
+    finally:
+        page.close()

@@ -34,6 +34,7 @@ function show(id) {
     const on = tab.dataset.view === view.id;
     tab.setAttribute('aria-selected', String(on));
     tab.tabIndex = on ? 0 : -1;
+    if (on) tab.scrollIntoView({ block: 'nearest', inline: 'nearest' });   // a phone's scrolled tab row
   }
   const root = document.getElementById('view');
   root.setAttribute('aria-labelledby', `tab-${view.id}`);
