@@ -1,10 +1,11 @@
 """Navigation logic figures, each beside a simple reference measured in the same run.
 
-Prints one markdown table. Budgets (DESIGN.md, issue 13): AMCL update with 2000 particles and
-60 beams 10 ms; a global plan across the apartment and on a 20 m x 20 m, 5 cm map 50 ms. The
-references are what a straightforward port would do: the likelihood field one particle at a
-time, Dijkstra with Python's heapq, the controller one trajectory at a time, the bare
-distance transform under the inflation, and a mapping scan raytraced beam by beam (Bresenham).
+Prints one markdown table. Budgets (docs/design.md, issue 13): AMCL update with 2000
+particles and 60 beams 10 ms; a global plan across the apartment and on a 20 m x 20 m, 5 cm
+map 50 ms. The references are what a straightforward port would do: the likelihood field one
+particle at a time, Dijkstra with Python's heapq, the controller one trajectory at a time,
+the bare distance transform under the inflation, and a mapping scan raytraced beam by beam
+(Bresenham).
 """
 
 from __future__ import annotations

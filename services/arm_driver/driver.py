@@ -4,7 +4,7 @@ One control thread owns the CAN master: at the control rate it checks the drives
 heartbeats, statuswords, bus-off), advances the set-points, sends them with SYNC and reports
 the arm state. Commands, estop and liveliness arrive from other threads and only touch the
 set-point generator under a lock. Any fault quick-stops every drive and latches until
-reset_fault; estop, the 200 ms watchdog and a vanished controller hold position instead.
+reset_fault; estop, the command watchdog and a vanished controller hold position instead.
 Whose commands are obeyed is decided by the service (asibot.ownership); after a fault reset,
 an estop release or a change of controller, a stream of commands from before moves nothing
 until it pauses (asibot.arming).
@@ -58,7 +58,6 @@ class ArmDriver:
         self.estop = False
         self._estop_reason = ""
         self.arming = Arming()          # a driver starts armed (asibot.arming says why)
-        self._watchdog_fired = False
         self._reset_request: tuple[threading.Event, list] | None = None
         self._feedback: dict[int, Feedback] = {}
         self.counters = {"cycles": 0, "rejected_commands": 0, "ignored_commands": 0, "not_ready": 0, "faults": 0,
@@ -125,7 +124,6 @@ class ArmDriver:
                 self.ref.position(values, velocities, now, measured)
             else:
                 self.ref.velocity(values, now)
-            self._watchdog_fired = False
             return True
 
     def heard(self, controller: str) -> None:
@@ -343,13 +341,12 @@ class ArmDriver:
 
     def _watchdog(self, now: float) -> None:
         with self._lock:
-            fired = not self._watchdog_fired and self.ref.watchdog_expired(now)
+            dog = self.ref.watchdog
+            fired = dog.fires(now, self.ref.streaming)
             if fired:
-                self._watchdog_fired = True
                 self.ref.hold()
         if fired:
-            self.on_event("warning", "watchdog", "No velocity command for 200 ms: the arm stopped and holds "
-                          "its position.")
+            self.on_event("warning", "watchdog", dog.says("velocity command", "the arm stopped and holds its position"))
 
     def _publish(self, fb: dict[int, Feedback]) -> None:
         with self._lock:

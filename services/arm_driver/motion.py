@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 
 from asibot.events import CommandRefused, quantity
-from asibot.messages import COMMAND_WATCHDOG_S
+from asibot.watchdog import Watchdog
 
 FEED_FORWARD_HORIZON_S = 0.1
 POSITION_TOLERANCE_RAD = 1e-4
@@ -47,7 +47,7 @@ class JointReference:
         self._goal = [0.0] * self.n
         self._feed_forward = [0.0] * self.n
         self._velocity = [0.0] * self.n
-        self._since = 0.0
+        self.watchdog = Watchdog()   # fed by every command
 
     def reset(self, positions: list[float]) -> None:
         """Start from where the joints are, standing still."""
@@ -79,7 +79,7 @@ class JointReference:
         self._goal = [min(max(v, lo), hi) for v, lo, hi in zip(values, self.lower, self.upper)]
         self._feed_forward = [max(-m, min(m, f)) for f, m in zip(ff, self.vmax)]
         self._velocity = [0.0] * self.n
-        self._since = now
+        self.watchdog.feed(now)
         self.mode = "position"
 
     def velocity(self, values: list[float], now: float) -> None:
@@ -87,7 +87,7 @@ class JointReference:
         self.check("velocity", values)
         self._velocity = [max(-m, min(m, v)) for v, m in zip(values, self.vmax)]
         self._feed_forward = [0.0] * self.n
-        self._since = now
+        self.watchdog.feed(now)
         self.mode = "velocity"
 
     def check(self, mode: str, values: list[float], feed_forward: list[float] | None = None,
@@ -104,9 +104,14 @@ class JointReference:
         if feed_forward:
             self._within_speeds(feed_forward, "velocity feed-forward")
 
+    @property
+    def streaming(self) -> bool:
+        """Whether a velocity command moves the arm: what the watchdog stops when it goes quiet."""
+        return self.mode == "velocity" and any(self._velocity)
+
     def watchdog_expired(self, now: float) -> bool:
-        """True once a velocity command is older than 200 ms while it still moves the arm."""
-        return self.mode == "velocity" and any(self._velocity) and now - self._since > COMMAND_WATCHDOG_S
+        """True once a velocity command is older than the watchdog period while it still moves the arm."""
+        return self.streaming and self.watchdog.silent(now)
 
     def step(self, now: float) -> list[float]:
         """Advance one period; returns the new set-points (rad)."""
@@ -117,7 +122,7 @@ class JointReference:
             if self.mode == "velocity":
                 want = t + self._velocity[i] * dt
             else:
-                ahead = min(max(now - self._since, 0.0), FEED_FORWARD_HORIZON_S)
+                ahead = min(max(now - self.watchdog.last, 0.0), FEED_FORWARD_HORIZON_S)
                 want = self._goal[i] + self._feed_forward[i] * ahead
             step = max(-vmax * dt, min(vmax * dt, want - t))
             # Never leave the limits; a joint found outside may only move back towards them.

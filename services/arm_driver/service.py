@@ -1,9 +1,8 @@
 """The Zenoh glue: bus messages to ArmDriver calls, and the driver's state and events out.
 
-Keys: publishes arm_state and events, subscribes arm_command and estop (latched, and kept
-served: asibot.estop), watches the controllers' liveliness to know which one holds the arm
-(asibot.ownership: only its commands are obeyed); serves driver rpc `status`, `reset_fault`
-and, on the emulated bus, `inject_fault`; announces driver_alive.
+Publishes arm_state; the rest of the driver contract (arm_command from the holder only, the
+estop, events, `status`, `reset_fault`, driver_alive) is `asibot.driver_contract`'s, with
+`inject_fault` on the emulated bus.
 """
 
 from __future__ import annotations
@@ -12,18 +11,15 @@ import argparse
 import logging
 import os
 
-from asibot import estop, keys
+from asibot import keys
 from asibot.arm_driver import canbus, config
 from asibot.arm_driver import emulator as emulation
 from asibot.arm_driver.driver import ArmDriver, FaultError
 from asibot.arm_driver.master import CanopenMaster
-from asibot.arming import NotReady
 from asibot.bus import Bus
+from asibot.driver_contract import DriverContract, command
 from asibot.errors import RpcError
-from asibot.estop import EStopState
-from asibot.events import CommandRefused, EventThrottle, refusal_reason
-from asibot.messages import ArmCommand, ArmState, EStop, Event
-from asibot.ownership import Holder, NotHolder, holders_status
+from asibot.messages import ArmCommand, ArmState
 from asibot.runtime import Service
 
 log = logging.getLogger(__name__)
@@ -54,60 +50,27 @@ class ArmDriverService(Service):
         else:
             can_bus = canbus.open_bus(spec, self.config.bitrate)
         self._state = bus.publisher(keys.arm_state(robot), ArmState)
-        self._events = bus.publisher(keys.events(robot), Event)
-        # Refused commands: one Event a second per reason, the rest counted (issue 10).
-        self._refusals = EventThrottle(self._events.put)
         self.bus = bus
+        self.contract = DriverContract(bus, robot)
         self.driver = ArmDriver(CanopenMaster(can_bus, self.config), self.config,
-                                on_state=self._state.put, on_event=self._event)
-        self.estop = EStopState(bus, robot, self._on_estop, self._release_refused)
-        self.holder = Holder(robot, "arm", on_change=self.driver.set_controller)
-        self.holder.follow(bus)
-        self.not_holder = 0
-        bus.subscribe(keys.arm_command(robot), ArmCommand, self._on_command, with_key=True,
-                      on_reject=self._refuse_command)
-        bus.serve(keys.driver_rpc(robot, "status"), self._status)
-        bus.serve(keys.driver_rpc(robot, "reset_fault"), self._reset_fault)
-        if self.emulator is not None:
-            bus.serve(keys.driver_rpc(robot, "inject_fault"), self._inject_fault)
-        bus.announce(keys.driver_alive(robot))
+                                on_state=self._state.put, on_event=self.contract.event)
+        verbs = {"inject_fault": self._inject_fault} if self.emulator is not None else {}
+        self.contract.serve(
+            [command("arm", self._obey, self.driver.heard)],
+            on_holder=lambda part, holder: self.driver.set_controller(holder), on_estop=self.driver.set_estop,
+            status=self.driver.status, reset_fault=self._reset_fault, verbs=verbs)
+        self.holder = self.contract.holders["arm"]
         self.driver.start()
 
+    @property
+    def not_holder(self) -> int:
+        return self.contract.not_holder
+
     # ------------------------------------------------------------ in
-    def _on_command(self, key: str, cmd: ArmCommand) -> None:
-        refused = self.holder.refusal(cmd)
-        if refused is not None:     # not the holder's: noted for re-arming, never obeyed
-            self.not_holder += 1
-            if isinstance(refused, NotHolder):   # a forged one says nothing of the holder's stream
-                self.driver.heard(cmd.controller)
-            self._refuse_command(key, refused)
-            return
-        try:
-            self.driver.command(cmd.mode, cmd.values, cmd.velocities, cmd.controller)
-        except NotReady as exc:     # a stream from before a recovery
-            self._refuse_command(key, exc)
-        except ValueError as exc:  # beyond the limits, not finite, wrong length: the driver's sentence
-            self.bus.reject(key, exc)
-            self._refuse_command(key, exc)
+    def _obey(self, cmd: ArmCommand) -> None:
+        self.driver.command(cmd.mode, cmd.values, cmd.velocities, cmd.controller)
 
-    def _refuse_command(self, key: str, exc: Exception) -> None:
-        # Answered with an Event, as the driver contract asks, not only counted; a stream of
-        # refusals gives one Event a second per reason, with the count of the others.
-        level, code = (exc.level, exc.code) if isinstance(exc, CommandRefused) else ("error", "bad_command")
-        self._refusals.event(level, code,
-                             f"Arm command refused, the arm keeps its previous motion: {str(exc).rstrip('.')}.",
-                             reason=f"arm:{refusal_reason(exc)}")
-
-    def _on_estop(self, msg: EStop) -> None:
-        self.driver.set_estop(msg.engaged, msg.reason, estop.named(msg))
-
-    def _release_refused(self, msg: EStop, why: str) -> None:
-        self._refusals.event("warning", "release_refused", estop.refused_text(msg, why), reason="estop:release")
-
-    def _status(self, request: dict) -> dict:
-        return {"robot": self.robot, **holders_status([self.holder]), **self.driver.status()}
-
-    def _reset_fault(self, request: dict) -> dict:
+    def _reset_fault(self) -> dict:
         try:
             return self.driver.reset_fault()
         except FaultError as exc:
@@ -143,16 +106,12 @@ class ArmDriverService(Service):
          "silent": emu.silent, "reboot": emu.reboot, "power_cycle": emu.power_cycle}[fault](j.node)
         return {}
 
-    # ------------------------------------------------------------ out
-    def _event(self, level: str, code: str, text: str) -> None:
-        self._events.put(Event(level=level, code=code, text=text))
-
     # ------------------------------------------------------------ runtime hooks
     def health(self) -> dict:
-        return {**self.driver.health(), "holder": self.holder.current or "", "not_holder": self.not_holder}
+        return {**self.driver.health(), **self.contract.health()}
 
     def close(self) -> None:
-        self._refusals.close()
+        self.contract.close()
         self.driver.close()
         if self.emulator is not None:
             self.emulator.close()

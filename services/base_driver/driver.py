@@ -1,12 +1,12 @@
 """The Pioneer base driver: the driver contract's base side, without knowing about Zenoh.
 
 One I/O thread owns the line: it connects (and reconnects every second after the cable is
-pulled), reads SIPs, refreshes the setpoint and runs the 200 ms cmd_vel watchdog. cmd_vel,
+pulled), reads SIPs, refreshes the setpoint and runs the cmd_vel watchdog (asibot.watchdog). cmd_vel,
 estop and reset_fault arrive from other threads and write at once (lowest latency).
 Safety rules: a lost connection zeroes the setpoint, so a reconnect never resumes an old
 velocity; while the estop is engaged every motion command is ignored; a cmd_vel beyond
 --max-vx / --max-wz (or not finite) is refused whole with a CommandRefused, never clamped and
-obeyed: the base keeps its previous command, which the watchdog ends 200 ms later. The
+obeyed: the base keeps its previous command, which the watchdog ends a period later. The
 service obeys only the controller that holds the base (asibot.ownership); after a reconnect,
 an estop release, a motor reset or a change of controller, a cmd_vel stream still running
 from before moves nothing until it pauses for a watchdog period (asibot.arming).
@@ -31,6 +31,7 @@ from asibot.base_driver.state import BaseState, StateTracker
 from asibot.errors import RpcError
 from asibot.events import CommandRefused, quantity
 from asibot.messages import COMMAND_WATCHDOG_S
+from asibot.watchdog import Watchdog
 
 log = logging.getLogger(__name__)
 
@@ -62,7 +63,7 @@ class BaseDriver:
         self.forced_params = params
         self.max_vx = max_vx
         self.max_wz = max_wz
-        self.watchdog = watchdog
+        self.watchdog = Watchdog(watchdog)
         self._on_state = on_state
         self._on_event = on_event
         self._link_factory = link_factory
@@ -72,8 +73,6 @@ class BaseDriver:
         self._tracker: StateTracker | None = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._last_cmd = 0.0
-        self._watchdog_tripped = False
         self.arming = Arming()          # a driver starts armed (asibot.arming says why)
         self._estop = False
         self._estop_reason = ""
@@ -140,8 +139,7 @@ class BaseDriver:
             # Only the tolerated noise is clamped here.
             cvx = max(-self.max_vx, min(self.max_vx, vx))
             cwz = max(-self.max_wz, min(self.max_wz, wz))
-            self._last_cmd = time.monotonic()
-            self._watchdog_tripped = False
+            self.watchdog.feed(time.monotonic())
             client = self._client
             if client is None:
                 return False
@@ -281,7 +279,7 @@ class BaseDriver:
             self._client = client
             self._tracker = StateTracker(client.params)
             self._last_sip = time.monotonic()
-            self._last_cmd = 0.0
+            self.watchdog.last = -math.inf      # nothing heard on this line yet
             self._notices.reset()
             self._reported_unreachable = False
             if self._estop:
@@ -327,13 +325,10 @@ class BaseDriver:
         if now - self._last_sip > SIP_TIMEOUT:
             raise ArcosError(f"no SIP for {SIP_TIMEOUT:g} s")
         with self._lock:
-            if (client.desired != (0, 0) and not self._watchdog_tripped
-                    and now - self._last_cmd > self.watchdog):
-                self._watchdog_tripped = True
+            if self.watchdog.fires(now, client.desired != (0, 0)):
                 self.counters["watchdog_stops"] += 1
                 client.set_velocity(0, 0)
-                self._on_event("warning", "watchdog",
-                               f"No cmd_vel for {self.watchdog * 1000:.0f} ms: the base stopped.")
+                self._on_event("warning", "watchdog", self.watchdog.says("cmd_vel", "the base stopped"))
             client.refresh()
 
     def _on_sip(self, payload: bytes) -> None:

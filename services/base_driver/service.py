@@ -1,8 +1,7 @@
 """The Zenoh glue: bus messages to BaseDriver calls, BaseState to bus messages. Nothing else.
 
-cmd_vel is obeyed only from the controller that holds the base (asibot.ownership: it
-announces itself on `keys.base_controller_alive(robot, id)` and puts its id in every Twist);
-the estop state is kept served after its sender exits (asibot.estop).
+The driver contract (cmd_vel from the holder only, the estop, events, `status`,
+`reset_fault`, driver_alive) is `asibot.driver_contract`'s.
 """
 
 from __future__ import annotations
@@ -12,13 +11,10 @@ import logging
 import math
 import os
 
-from asibot import estop, keys
-from asibot.arming import NotReady
+from asibot import keys
 from asibot.bus import Bus
-from asibot.estop import EStopState
-from asibot.events import CommandRefused, EventThrottle, refusal_reason
-from asibot.messages import Battery, Bumpers, EStop, Event, Odometry, Sonar, Twist
-from asibot.ownership import Holder, NotHolder, holders_status
+from asibot.driver_contract import DriverContract, command
+from asibot.messages import Battery, Bumpers, Odometry, Sonar, Twist
 from asibot.runtime import Service
 
 from asibot.base_driver.driver import DEFAULT_MAX_VX, DEFAULT_MAX_WZ, BaseDriver
@@ -41,60 +37,28 @@ class BaseDriverService(Service):
         self._sonar = bus.publisher(keys.base_sonar(robot), Sonar)
         self._bumpers = bus.publisher(keys.base_bumpers(robot), Bumpers)
         self._battery = bus.publisher(keys.base_battery(robot), Battery)
-        self._events = bus.publisher(keys.events(robot), Event)
-        # Refused commands: one Event a second per reason, the rest counted (issue 10).
-        self._refusals = EventThrottle(self._events.put)
         self.bus = bus
-        self.driver = BaseDriver(port, on_state=self._publish_state, on_event=self._publish_event,
+        self.contract = DriverContract(bus, robot)
+        self.driver = BaseDriver(port, on_state=self._publish_state, on_event=self.contract.event,
                                  baud=baud, params=KNOWN[params] if params else None,
                                  max_vx=max_vx, max_wz=max_wz)
         self._angles: list[float] = []
-        self.estop = EStopState(bus, robot, self._on_estop, self._release_refused)
-        self.holder = Holder(robot, "base", on_change=self.driver.set_controller)
-        self.holder.follow(bus)
-        self.not_holder = 0
-        bus.subscribe(keys.base_cmd_vel(robot), Twist, self._on_cmd_vel, with_key=True,
-                      on_reject=self._refuse_command)
-        bus.serve(keys.driver_rpc(robot, "status"), self._status)
-        bus.serve(keys.driver_rpc(robot, "reset_fault"), self._reset_fault)
-        bus.announce(keys.driver_alive(robot))
+        self.contract.serve(
+            [command("cmd_vel", self._obey, self.driver.heard)],
+            on_holder=lambda part, holder: self.driver.set_controller(holder), on_estop=self.driver.set_estop,
+            status=self.driver.status, reset_fault=self._reset_fault)
+        self.holder = self.contract.holders["base"]
         self.driver.start()
 
+    @property
+    def not_holder(self) -> int:
+        return self.contract.not_holder
+
     # ------------------------------------------------------------ in
-    def _on_cmd_vel(self, key: str, msg: Twist) -> None:
-        refused = self.holder.refusal(msg)
-        if refused is not None:     # not the holder's: noted for re-arming, never obeyed
-            self.not_holder += 1
-            if isinstance(refused, NotHolder):   # a forged one says nothing of the holder's stream
-                self.driver.heard(msg.controller)
-            self._refuse_command(key, refused)
-            return
-        try:
-            self.driver.cmd_vel(msg.vx, msg.wz, msg.controller)
-        except NotReady as exc:     # a stream from before a recovery
-            self._refuse_command(key, exc)
-        except ValueError as exc:  # beyond --max-vx/--max-wz, not finite: the driver's sentence
-            self.bus.reject(key, exc)
-            self._refuse_command(key, exc)
+    def _obey(self, msg: Twist) -> None:
+        self.driver.cmd_vel(msg.vx, msg.wz, msg.controller)
 
-    def _refuse_command(self, key: str, exc: Exception) -> None:
-        # Answered with an Event, as the driver contract asks, not only counted; a stream of
-        # refusals gives one Event a second per reason, with the count of the others.
-        level, code = (exc.level, exc.code) if isinstance(exc, CommandRefused) else ("error", "bad_command")
-        self._refusals.event(level, code,
-                             f"Base command refused, the base keeps its previous motion: {str(exc).rstrip('.')}.",
-                             reason=f"cmd_vel:{refusal_reason(exc)}")
-
-    def _on_estop(self, msg: EStop) -> None:
-        self.driver.set_estop(msg.engaged, msg.reason, estop.named(msg))
-
-    def _release_refused(self, msg: EStop, why: str) -> None:
-        self._refusals.event("warning", "release_refused", estop.refused_text(msg, why), reason="estop:release")
-
-    def _status(self, request: dict) -> dict:
-        return {"robot": self.robot, **holders_status([self.holder]), **self.driver.status()}
-
-    def _reset_fault(self, request: dict) -> dict:
+    def _reset_fault(self) -> dict:
         return self.driver.reset_fault()  # refusals are RpcErrors with the driver's sentence
 
     # ------------------------------------------------------------ out
@@ -108,17 +72,14 @@ class BaseDriverService(Service):
         self._bumpers.put(Bumpers(front=s.front_bumpers, rear=s.rear_bumpers))
         self._battery.put(Battery(volts=s.volts))
 
-    def _publish_event(self, level: str, code: str, text: str) -> None:
-        self._events.put(Event(level=level, code=code, text=text))
-
     # ------------------------------------------------------------ runtime hooks
     def health(self) -> dict:
         st = self.driver.status()
         return {"connected": st["connected"], "mode": st["mode"], "fault": st["fault"], **st["counters"],
-                "holder": self.holder.current or "", "not_holder": self.not_holder}
+                **self.contract.health()}
 
     def close(self) -> None:
-        self._refusals.close()
+        self.contract.close()
         self.driver.close()
 
 

@@ -39,6 +39,7 @@ import numpy as np
 from asibot.arming import Arming
 from asibot.errors import RpcError
 from asibot.messages import COMMAND_WATCHDOG_S
+from asibot.watchdog import Watchdog
 
 from . import trajectory
 
@@ -107,7 +108,7 @@ class Controller:
         self._hold: np.ndarray | None = None
         self._stream_pose: np.ndarray | None = None
         self._stream_vel = np.zeros(0)
-        self._stream_seen = 0.0
+        self.watchdog = Watchdog()     # a streamed motion lapses when its requests stop
         self._last_tick: float | None = None
         self._send_hold = False
         # Bumped by everything that must cancel a motion being planned (stop, estop, fault,
@@ -251,7 +252,7 @@ class Controller:
                 self.outcome = None
             self.state = mode
             self._stream_vel = v
-            self._stream_seen = now
+            self.watchdog.feed(now)
 
     def stop(self) -> None:
         """Stop any motion; the arm holds its last reference. With no motion of its own running,
@@ -287,8 +288,8 @@ class Controller:
             return None
 
     def _stream_tick(self, now: float) -> Reference | None:
-        if now - self._stream_seen > COMMAND_WATCHDOG_S:
-            self._abort(RpcError("timeout", "No streamed command for 200 ms; the motion was stopped."))
+        if self.watchdog.silent(now):
+            self._abort(RpcError("timeout", self.watchdog.says("streamed command", "the motion was stopped")))
             return self.tick(now)
         dt = 0.0 if self._last_tick is None else now - self._last_tick
         self._last_tick = now

@@ -1,6 +1,6 @@
 """AMCL: Monte Carlo localisation on the map, as ROS's amcl does it, vectorised with numpy.
 
-Facts in ../shared/reference/ros.md section 4 (amcl pf.c, amcl_laser.cpp, amcl_odom.cpp):
+Facts in docs/reference/navigation.md, 'AMCL' (amcl pf.c, amcl_laser.cpp, amcl_odom.cpp):
 
 - Motion: the "diff-corrected" odometry model: the odometry delta is split into rot1,
   trans, rot2; each particle gets them with Gaussian noise whose *standard deviation* is

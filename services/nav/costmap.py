@@ -1,19 +1,20 @@
 """A layered costmap: the static map, obstacles seen by the scan, and inflation around both.
 
-Values and the inflation cost function are costmap_2d's (../shared/reference/ros.md 5.1):
-FREE 0, INSCRIBED 253, LETHAL 254, NO_INFORMATION 255; a cell at distance d (m) from the
-nearest lethal cell costs 254 at d = 0, 253 within the footprint's inscribed radius, and
-int(252 exp(-cost_scaling_factor (d - inscribed))) out to `inflation_radius`. Distances
-come from OpenCV's exact Euclidean distance transform, so an update is a few vectorised
-passes over the grid and never a loop over cells.
+Values and the inflation cost function are costmap_2d's (docs/reference/navigation.md,
+'Costmap'): FREE 0, INSCRIBED 253, LETHAL 254, NO_INFORMATION 255; a cell at distance d (m)
+from the nearest lethal cell costs 254 at d = 0, 253 within the footprint's inscribed
+radius, and int(252 exp(-cost_scaling_factor (d - inscribed))) out to `inflation_radius`.
+Distances come from OpenCV's exact Euclidean distance transform, so an update is a few
+vectorised passes over the grid and never a loop over cells.
 
 Obstacle layer: scan endpoints closer than `obstacle_range` mark cells lethal; every beam
 clears the cells it passed through (raytracing, up to `raytrace_range`), before marking, as
-costmap_2d does. Two of the users' top pain points (ros.md 6.3, "ghost obstacles") are
-answered here: a max-range or infinite reading clears its whole ray (`clear_on_max_range`),
-and a mark not seen again for `obstacle_decay_s` fades, so an obstacle that left the field of
-view of a narrow depth camera does not stay forever. The cells under the robot are cleared
-(footprint clearing): the robot cannot stand inside an obstacle.
+costmap_2d does. Two of the users' top pain points (same file, 'Known complaints', "ghost
+obstacles") are answered here: a max-range or infinite reading clears its whole ray
+(`clear_on_max_range`), and a mark not seen again for `obstacle_decay_s` fades, so an
+obstacle that left the field of view of a narrow depth camera does not stay forever. The
+cells under the robot are cleared (footprint clearing): the robot cannot stand inside an
+obstacle.
 
 Defaults follow nav2's tuned inflation (0.70 m, scaling 3.0), which keeps paths in the middle
 of doorways; nav2's obstacle/raytrace ranges 2.5 / 3.0 m.

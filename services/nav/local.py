@@ -1,6 +1,7 @@
 """Local controller: DWA-style sampling of (v, w), scored on the costmap, at 10-20 Hz.
 
-What it does each cycle (facts: ../shared/reference/ros.md 5.3, DWA and DWB):
+What it does each cycle (facts: docs/reference/navigation.md, 'Local controller', DWA and
+DWB):
 - the dynamic window: speeds reachable within one control period from the current ones at
   the P3-AT's accelerations, inside the navigation limits (`asibot.nav.robot.Limits`), with
   the top speed lowered near the goal so the robot can always stop on it;
@@ -12,10 +13,11 @@ What it does each cycle (facts: ../shared/reference/ros.md 5.3, DWA and DWB):
   (occ_bias), and the distance of a point ahead of the robot to the path (align_bias, DWB's
   PathAlign); a turn against the previous turn direction before the robot moved at all costs
   extra (the oscillation critic).
-- Two of the users' top complaints about DWA (ros.md 6.3: rotate-in-place trajectories
-  scored poorly, creeping or failing near the goal) are handled outside the sampling: when
-  the path starts behind the robot it first turns in place (DWB's RotateToGoal idea applied
-  to the path), and once within xy_goal_tolerance it only turns to the goal's heading.
+- Two of the users' top complaints about DWA (same file, 'Known complaints': rotate-in-place
+  trajectories scored poorly, creeping or failing near the goal) are handled outside the
+  sampling: when the path starts behind the robot it first turns in place (DWB's
+  RotateToGoal idea applied to the path), and once within xy_goal_tolerance it only turns to
+  the goal's heading.
 
 `compute` returns a `Control` with the speeds and a status: "moving", "arrived" or
 "blocked" with a sentence. It never sees the bus or a clock beyond the arguments.

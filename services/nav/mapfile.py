@@ -1,10 +1,10 @@
 """Read and write ROS map_server maps (YAML + PGM) exactly as map_server does.
 
-Facts in docs/maps.md and ../shared/reference/ros.md section 5.6 (map_server image_loader.cpp,
-map_saver.cpp). Loading: a pixel v (negated to 255 - v when `negate`) has occupancy
-p = (255 - v) / 255; p > occupied_thresh -> 100, p < free_thresh -> 0, otherwise -1 in
-trinary mode or 1 + 98 (p - free) / (occ - free) (truncated) in scale mode; raw mode copies v.
-The image's first row is the top of the map (largest y), so rows are flipped into the grid.
+Facts in docs/maps.md (map_server image_loader.cpp, map_saver.cpp). Loading: a pixel v
+(negated to 255 - v when `negate`) has occupancy p = (255 - v) / 255; p > occupied_thresh ->
+100, p < free_thresh -> 0, otherwise -1 in trinary mode or 1 + 98 (p - free) / (occ - free)
+(truncated) in scale mode; raw mode copies v. The image's first row is the top of the map
+(largest y), so rows are flipped into the grid.
 
 Saving: trinary is map_saver's (free 0..25 -> 254, occupied >= 65 -> 0, else 205; negate 0,
 occupied_thresh 0.65, free_thresh 0.196, which puts 205 just above free_thresh so it reads back

@@ -1,11 +1,11 @@
 """The goal state machine: plan, follow, replan, recover, and tell the user how it goes.
 
-Action semantics (../shared/reference/ros.md 5.5, actionlib's SimpleActionServer): one goal
-at a time; `goto` answers at once with a goal id; a new goal preempts the running one (its
-result is PREEMPTED); `cancel` ends it (CANCELED); it ends SUCCEEDED when the robot stands
-on the goal within the controller's tolerances, or ABORTED with a sentence that says why.
-Bad input (a NaN, a pose off the map, a goal in a wall) is refused by `goto` with a sentence
-and changes nothing: the running goal, if any, goes on.
+Action semantics (docs/reference/navigation.md, 'Action semantics': actionlib's
+SimpleActionServer): one goal at a time; `goto` answers at once with a goal id; a new goal
+preempts the running one (its result is PREEMPTED); `cancel` ends it (CANCELED); it ends
+SUCCEEDED when the robot stands on the goal within the controller's tolerances, or ABORTED
+with a sentence that says why. Bad input (a NaN, a pose off the map, a goal in a wall) is
+refused by `goto` with a sentence and changes nothing: the running goal, if any, goes on.
 
 `step(now, pose, scan, odom)` is called at the control rate (10-20 Hz) with the localised
 map pose, the latest scan (or None) and the odometry (for the current speeds); it updates the

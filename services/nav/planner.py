@@ -1,14 +1,14 @@
 """Global planner: A* over the costmap (pyastar2d, C++), then shortcutting and resampling.
 
-Cell costs are navfn's (../shared/reference/ros.md 5.2): neutral 50 + factor x costmap value (2.0, see below),
-cells >= INSCRIBED (253) are walls, unknown cells are walls unless `allow_unknown`. The cost
-is divided by the neutral cost so free space costs 1 per cell, which keeps pyastar2d's
-heuristic admissible. pyastar2d was chosen because it is a 56 kB compiled A* that plans a
-20 m x 20 m, 5 cm map in about 10 ms where scipy's csgraph Dijkstra needs ~130 ms (building
-the sparse graph dominates) and a per-cell Python heap needs seconds. Its diagonal steps cost
-the same as straight ones, so the raw path zig-zags; shortcutting (string pulling on the
-costmap) straightens it, accepting a straight segment only when it passes no closer to
-obstacles than the A* path it replaces did.
+Cell costs are navfn's (docs/reference/navigation.md, 'Global planner'): neutral 50 +
+factor x costmap value (2.0, see below), cells >= INSCRIBED (253) are walls, unknown cells are
+walls unless `allow_unknown`. The cost is divided by the neutral cost so free space costs 1
+per cell, which keeps pyastar2d's heuristic admissible. pyastar2d was chosen because it is a
+56 kB compiled A* that plans a 20 m x 20 m, 5 cm map in about 10 ms where scipy's csgraph
+Dijkstra needs ~130 ms (building the sparse graph dominates) and a per-cell Python heap
+needs seconds. Its diagonal steps cost the same as straight ones, so the raw path zig-zags;
+shortcutting (string pulling on the costmap) straightens it, accepting a straight segment
+only when it passes no closer to obstacles than the A* path it replaces did.
 
 A goal in a wall or in the inscribed band is moved to the nearest free cell when that is
 within `tolerance`; otherwise the error names the nearest free spot, so the user can send that.

@@ -1,12 +1,13 @@
 """Recovery behaviours: what the robot tries when it cannot plan or cannot move.
 
-move_base's order (../shared/reference/ros.md 5.4): clear far obstacles (conservative reset,
-3 m), turn on the spot, clear nearly everything (aggressive reset, 4 x circumscribed radius),
-turn again; nav2 adds backing up 0.30 m at 0.15 m/s. Here: conservative clear, spin, back up,
-aggressive clear, spin. A spin or a back-up that the costmap says would touch something is
-skipped as failed (nav2's BackUp that never ends when blocked is a known complaint, ros.md
-6.3), and each has a time limit. Each behaviour is closed-loop on the map pose (odometry
-carried forward between AMCL updates) and names itself in a few words for the status line.
+move_base's order (docs/reference/navigation.md, 'Recovery behaviours'): clear far obstacles
+(conservative reset, 3 m), turn on the spot, clear nearly everything (aggressive reset, 4 x
+circumscribed radius), turn again; nav2 adds backing up 0.30 m at 0.15 m/s. Here:
+conservative clear, spin, back up, aggressive clear, spin. A spin or a back-up that the
+costmap says would touch something is skipped as failed (nav2's BackUp that never ends when
+blocked is a known complaint, same file, 'Known complaints'), and each has a time limit.
+Each behaviour is closed-loop on the map pose (odometry carried forward between AMCL
+updates) and names itself in a few words for the status line.
 """
 
 from __future__ import annotations

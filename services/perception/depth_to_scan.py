@@ -1,8 +1,8 @@
 """One depth image -> the nearest obstacle per bearing, with depthimage_to_laserscan's semantics
 but a band of heights instead of a band of rows.
 
-depthimage_to_laserscan (ROS reference, ../shared/reference/ros.md section 3.2) keeps, per
-image column, the nearest valid return of `scan_height` rows around cy: angles from the
+depthimage_to_laserscan (docs/reference/navigation.md, 'Depth image to laser scan') keeps,
+per image column, the nearest valid return of `scan_height` rows around cy: angles from the
 intrinsics, `range_min`/`range_max` on the distance in the camera's x-z plane, a finite
 in-range value beating no value. Its known failure (#69) is that a low obstacle, a shoe or a
 table leg, lies below those rows and is never seen; pointcloud_to_laserscan's is cost (a

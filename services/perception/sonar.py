@@ -17,7 +17,7 @@ cone", so it is used where the cameras fail and nowhere else:
 
 Readings outside [min_range, max_range) are ignored: the P3-AT reports its maximum, 4.335 m,
 when no echo comes back (not "free": a specular surface also returns nothing). Transducer
-poses are the P3-AT's (ARIA p3at-sh.p, ../shared/reference/ros.md section 1.8, the same the sim
+poses are the P3-AT's (ARIA p3at-sh.p, docs/arcos.md, 'P3-AT parameters', the same the sim
 and the base driver use); the headings come from each Sonar message.
 """
 

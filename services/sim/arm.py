@@ -1,7 +1,7 @@
 """Joint tracking with a driver's safety rules, independent of MuJoCo and of the bus.
 
 Why a separate class: the sim must behave exactly like a hardware driver (docs/foundation-api.md, "Contracts": driver
-contract), and the rules (limits, max speeds, 200 ms watchdog, latched estop, following-error
+contract), and the rules (limits, max speeds, the command watchdog, latched estop, following-error
 fault) are easier to trust when they are tested without a physics engine. The class turns
 `ArmCommand`s into a position reference per physics step; the physics engine then follows
 that reference with stiff position servos, as the real drives do.
@@ -16,7 +16,8 @@ from typing import Callable, Sequence
 import numpy as np
 
 from asibot.events import CommandRefused, quantity
-from asibot.messages import COMMAND_WATCHDOG_S, ArmCommand
+from asibot.messages import ArmCommand
+from asibot.watchdog import Watchdog
 
 FEEDFORWARD_HORIZON_S = 0.05
 """Longest extrapolation of a position reference by its velocity feed-forward."""
@@ -77,9 +78,8 @@ class JointTracker:
     estop: bool = False
     _target: np.ndarray | None = None
     _feedforward: np.ndarray | None = None
-    _command_time: float = 0.0
+    watchdog: Watchdog = field(default_factory=Watchdog)   # fed by every command
     _velocity: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    _watchdog_fired: bool = False
     _lag_since: float | None = None
 
     def __post_init__(self) -> None:
@@ -100,8 +100,7 @@ class JointTracker:
             raise CommandRejected("the emergency stop is engaged; release it before moving the arm")
         if self.mode == "fault":
             raise CommandRejected(f"the arm is in fault ({self.fault}); call reset_fault first")
-        self._command_time = now
-        self._watchdog_fired = False
+        self.watchdog.feed(now)
         # Only the tolerated noise (or a way back from outside the limits) is clipped here.
         if cmd.mode == "position":
             self.mode = "position"
@@ -179,7 +178,7 @@ class JointTracker:
         self._velocity[:] = 0.0
         self._target = self.q_ref.copy()
         self._feedforward = None
-        self._watchdog_fired = True  # already stopped: nothing left for the watchdog to do
+        self.watchdog.fired = True  # already stopped: nothing left for the watchdog to do
 
     def reset_fault(self, q_measured: Sequence[float]) -> None:
         self.fault = ""
@@ -191,17 +190,16 @@ class JointTracker:
     # ------------------------------------------------------------------ the step
     def step(self, q_measured: np.ndarray, dt: float, now: float) -> np.ndarray:
         """Advance the reference by dt and return it (rad), within limits and speeds."""
-        if self.mode == "velocity" and not self._watchdog_fired and now - self._command_time > COMMAND_WATCHDOG_S:
-            self._watchdog_fired = True
+        if self.watchdog.fires(now, self.mode == "velocity"):
             self.hold()
-            self.notify(Notice("warning", "watchdog",
-                               f"No arm command for {COMMAND_WATCHDOG_S * 1000:.0f} ms in velocity mode; the arm stopped."))
+            self.notify(Notice("warning", "watchdog", self.watchdog.says("arm command in velocity mode",
+                                                                         "the arm stopped")))
         if self.mode == "velocity" and self._target is None:
             self.q_ref = np.clip(self.q_ref + self._velocity * dt, self.limits.lower, self.limits.upper)
         elif self._target is not None:
             goal = self._target
             if self._feedforward is not None:
-                ahead = min(max(now - self._command_time, 0.0), FEEDFORWARD_HORIZON_S)
+                ahead = min(max(now - self.watchdog.last, 0.0), FEEDFORWARD_HORIZON_S)
                 goal = np.clip(goal + self._feedforward * ahead, self.limits.lower, self.limits.upper)
             step = np.clip(goal - self.q_ref, -self.limits.max_velocity * dt, self.limits.max_velocity * dt)
             self.q_ref = self.q_ref + step

@@ -5,7 +5,7 @@ Numbers (docs/arcos.md, "P3-AT parameters"): P3-AT MaxVelocity 1.2 m/s and MaxRV
 300 deg/s (ARIA p3at-sh.p). ARIA leaves accelerations to the firmware; we use the p2os
 navigation limits acc_lim_x 2.5 m/s^2 and acc_lim_th 3.2 rad/s^2 as the ramp. A command
 beyond the P3-AT's max speeds (more than SPEED_TOLERANCE over) is refused whole, never
-clamped: the base keeps its previous command, which the watchdog ends 200 ms later.
+clamped: the base keeps its previous command, which the watchdog ends a period later.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 
 from asibot.events import quantity
-from asibot.messages import COMMAND_WATCHDOG_S
+from asibot.watchdog import Watchdog
 from asibot.sim.arm import BadCommand, CommandRejected, Notice
 
 MAX_VX = 1.2
@@ -37,16 +37,14 @@ class BaseDrive:
     vx: float = 0.0
     wz: float = 0.0
     _goal: tuple[float, float] = (0.0, 0.0)
-    _command_time: float = -1e9
-    _watchdog_fired: bool = True
+    watchdog: Watchdog = field(default_factory=Watchdog)   # fed by every command
 
     def command(self, vx: float, wz: float, now: float) -> None:
         self.check(vx, wz)
         if self.estop:
             raise CommandRejected("the emergency stop is engaged; release it before driving")
         self._goal = (float(np.clip(vx, -MAX_VX, MAX_VX)), float(np.clip(wz, -MAX_WZ, MAX_WZ)))
-        self._command_time = now
-        self._watchdog_fired = False
+        self.watchdog.feed(now)
 
     def check(self, vx: float, wz: float) -> None:
         """BadCommand when vx or wz is not finite or beyond the P3-AT's max speeds."""
@@ -71,11 +69,9 @@ class BaseDrive:
 
     def step(self, dt: float, now: float) -> tuple[float, float]:
         """Advance the ramp by dt; returns the body velocity (vx m/s, wz rad/s) to apply."""
-        if not self._watchdog_fired and now - self._command_time > COMMAND_WATCHDOG_S:
-            self._watchdog_fired = True
+        if self.watchdog.fires(now):
             if self._goal != (0.0, 0.0):
-                self.notify(Notice("warning", "watchdog",
-                                   f"No drive command for {COMMAND_WATCHDOG_S * 1000:.0f} ms; the base stopped."))
+                self.notify(Notice("warning", "watchdog", self.watchdog.says("drive command", "the base stopped")))
             self._goal = (0.0, 0.0)
         gx, gw = self._goal
         self.vx += float(np.clip(gx - self.vx, -ACC_X * dt, ACC_X * dt))

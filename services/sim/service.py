@@ -16,20 +16,18 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any
 
 import mujoco
 
-from asibot import estop, keys
+from asibot import keys
 from asibot import messages as m
 from asibot.bus import Bus
-from asibot.errors import MessageError, RpcError
-from asibot.estop import EStopState
-from asibot.events import CommandRefused, EventThrottle, refusal_reason
-from asibot.ownership import Holder, NotHolder, holders_status
+from asibot.driver_contract import DriverContract, command
+from asibot.errors import RpcError
+from asibot.events import CommandRefused
 from asibot.runtime import Service
 from asibot.sim import viewer
-from asibot.sim.arm import CommandRejected, Notice
+from asibot.sim.arm import Notice
 from asibot.sim.cameras import Camera
 from asibot.sim.scene import WORLDS
 from asibot.sim.simulation import Simulation, world_for
@@ -66,9 +64,9 @@ class SimService(Service):
         rid = sim.robot.robot_id
         self.robot_id = rid
         self.stop_event = threading.Event()
+        self.contract = DriverContract(bus, rid)
         self._pub_arm = bus.publisher(keys.arm_state(rid), m.ArmState)
         self._pub_grip = bus.publisher(keys.gripper_state(rid), m.GripperState)
-        self._pub_event = bus.publisher(keys.events(rid), m.Event)
         if sim.base:
             self._pub_odom = bus.publisher(keys.base_odom(rid), m.Odometry)
             self._pub_sonar = bus.publisher(keys.base_sonar(rid), m.Sonar)
@@ -78,113 +76,29 @@ class SimService(Service):
         self._cameras_ready = threading.Event()
         if options.camera_hz <= 0:
             self._cameras_ready.set()
-        self._commands_rejected = 0
-        # Refused commands: one Event a second per reason, the rest counted (issue 10).
-        self._refusals = EventThrottle(self._pub_event.put)
         self._frames = 0
         self._rtf = 0.0
-        self.holders = {part: Holder(rid, part, on_change=lambda h, part=part: self.sim.set_controller(part, h))
-                        for part in (("arm", "base") if sim.base else ("arm",))}
-        for holder in self.holders.values():
-            holder.follow(bus)
-        bus.subscribe(keys.arm_command(rid), m.ArmCommand, self._on_arm_command,
-                      on_reject=lambda k, exc: self._malformed("arm", k, exc))
-        bus.subscribe(keys.gripper_command(rid), m.GripperCommand, self._on_gripper_command,
-                      on_reject=lambda k, exc: self._malformed("gripper", k, exc))
+        commands = [command("arm", self.sim.command_arm, lambda c: self.sim.heard("arm", c)),
+                    command("gripper", lambda cmd: self.sim.command_gripper(cmd.opening))]
         if sim.base:
-            bus.subscribe(keys.base_cmd_vel(rid), m.Twist, self._on_cmd_vel,
-                          on_reject=lambda k, exc: self._malformed("cmd_vel", k, exc))
-        self.estop = EStopState(bus, rid, self._on_estop, self._release_refused)
-        for verb, handler in {"status": self._rpc_status, "reset_fault": self._rpc_reset_fault,
-                              "reset_world": self._rpc_reset_world,
-                              "set_object_pose": self._rpc_set_object_pose,
-                              "object_pose": self._rpc_object_pose,
-                              "set_robot_pose": self._rpc_set_robot_pose}.items():
-            bus.serve(keys.driver_rpc(rid, verb), handler)
-        bus.announce(keys.driver_alive(rid))
+            commands.append(command("cmd_vel", lambda cmd: self.sim.command_base(cmd.vx, cmd.wz, cmd.controller),
+                                    lambda c: self.sim.heard("base", c)))
+        self.contract.serve(
+            commands, on_holder=self.sim.set_controller, on_estop=self.sim.set_estop,
+            status=self.sim.status, reset_fault=self._reset_fault,
+            verbs={"reset_world": self._rpc_reset_world, "set_object_pose": self._rpc_set_object_pose,
+                   "object_pose": self._rpc_object_pose, "set_robot_pose": self._rpc_set_robot_pose},
+            # Commands during an estop are refused by the state, not by what they say: logged only.
+            quiet=lambda exc: self.sim.estop and not isinstance(exc, CommandRefused))
+        self.holders = self.contract.holders
         self._threads = [threading.Thread(target=self._physics_loop, name="sim-physics", daemon=True)]
         if options.camera_hz > 0:
             self._threads.append(threading.Thread(target=self._camera_loop, name="sim-cameras", daemon=True))
         for t in self._threads:
             t.start()
 
-    # ------------------------------------------------------------------ commands in
-    # Every refusal is answered with an Event (the driver contract), at most one a second per
-    # reason: a stream of bad commands gives one Event a second with the count of the others.
-    WHO = {"arm": "Arm command refused, the arm keeps its previous motion",
-           "gripper": "Gripper command refused, the gripper keeps its previous opening",
-           "cmd_vel": "Base command refused, the base keeps its previous motion"}
-
-    #: The part of the robot each command topic moves, and whose holder it must come from.
-    PART = {"arm": "arm", "gripper": "arm", "cmd_vel": "base"}
-
-    def _malformed(self, topic: str, key: str, exc: MessageError) -> None:
-        self._reject(topic, refusal_reason(exc), f"{self.WHO[topic]}: {exc}")
-
-    def _reject(self, topic: str, reason: str, text: str, level: str = "error", code: str = "bad_command") -> None:
-        self._commands_rejected += 1
-        text = f"{text.rstrip('.')}."
-        if self._refusals.event(level, code, text, reason=f"{topic}:{reason}"):
-            log.warning("%s", text)
-
-    def _ignored(self, topic: str, exc: ValueError) -> None:
-        """Bad values, strangers' commands and streams from before a recovery are refused with
-        an Event; commands refused because of the state are logged, not shouted, during an estop."""
-        if self.sim.estop and not isinstance(exc, CommandRefused):
-            log.debug("ignored a command: %s", exc)
-        elif isinstance(exc, CommandRefused):
-            self._reject(topic, exc.reason, f"{self.WHO[topic]}: {exc}", exc.level, exc.code)
-        else:
-            self._reject(topic, exc.reason, f"{self.WHO[topic]}: {exc}")
-
-    def _holds(self, topic: str, cmd: Any) -> bool:
-        """Whether the holder of the part `topic` moves sent `cmd`; if not, a command of
-        another controller is noted (a stream of the next holder must not move the part at
-        once), and the command refused."""
-        part = self.PART[topic]
-        refused = self.holders[part].refusal(cmd)
-        if refused is None:
-            return True
-        if topic != "gripper" and isinstance(refused, NotHolder):
-            self.sim.heard(part, cmd.controller)
-        self._ignored(topic, refused)
-        return False
-
-    def _on_arm_command(self, cmd: m.ArmCommand) -> None:
-        if not self._holds("arm", cmd):
-            return
-        try:
-            self.sim.command_arm(cmd)
-        except (CommandRejected, CommandRefused) as exc:
-            self._ignored("arm", exc)
-
-    def _on_gripper_command(self, cmd: m.GripperCommand) -> None:
-        if not self._holds("gripper", cmd):
-            return
-        try:
-            self.sim.command_gripper(cmd.opening)
-        except (CommandRejected, CommandRefused) as exc:
-            self._ignored("gripper", exc)
-
-    def _on_cmd_vel(self, cmd: m.Twist) -> None:
-        if not self._holds("cmd_vel", cmd):
-            return
-        try:
-            self.sim.command_base(cmd.vx, cmd.wz, cmd.controller)
-        except (CommandRejected, CommandRefused) as exc:
-            self._ignored("cmd_vel", exc)
-
-    def _on_estop(self, msg: m.EStop) -> None:
-        self.sim.set_estop(msg.engaged, msg.reason, estop.named(msg))
-
-    def _release_refused(self, msg: m.EStop, why: str) -> None:
-        self._refusals.event("warning", "release_refused", estop.refused_text(msg, why), reason="estop:release")
-
     # ------------------------------------------------------------------ RPC
-    def _rpc_status(self, req: dict) -> dict:
-        return {**self.sim.status(), **holders_status(self.holders.values())}
-
-    def _rpc_reset_fault(self, req: dict) -> dict:
+    def _reset_fault(self) -> dict:
         self.sim.reset_fault()
         return {}
 
@@ -256,7 +170,7 @@ class SimService(Service):
         self._pub_arm.put(sim.arm_state())
         while not sim.notices.empty():
             n: Notice = sim.notices.get()
-            self._pub_event.put(m.Event(level=n.level, code=n.code, text=n.text))
+            self.contract.event(n.level, n.code, n.text)
         if tick % 5 == 0:
             self._pub_grip.put(sim.gripper_state())
         if sim.base is None:
@@ -321,11 +235,11 @@ class SimService(Service):
 
     def health(self) -> dict:
         return {"world": self.sim.world, "sim_time": round(self.sim.time, 3), "rtf": round(self._rtf, 3),
-                "camera_frames": self._frames, "commands_rejected": self._commands_rejected,
-                "estop": self.sim.estop, "arm_mode": self.sim.arm.mode}
+                "camera_frames": self._frames, "estop": self.sim.estop, "arm_mode": self.sim.arm.mode,
+                **self.contract.health()}
 
     def close(self) -> None:
-        self._refusals.close()
+        self.contract.close()
         self.stop_event.set()
         for t in self._threads:
             t.join(timeout=1.5)
