@@ -33,53 +33,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from table import print_table  # noqa: E402  bench/table.py: run as `python bench/<name>.py`
 
+from asibot.testing import ESCAPING_PROGRAM, processes_with  # noqa: E402
 from asibot.web.runner import Limits, ProgramRunner, _limiter  # noqa: E402
 from asibot.web.sandbox import Sandbox  # noqa: E402
 
 MODES = {"sandbox": {}, "cgroups only": {"bwrap": False}, "supervisor only": {"bwrap": False, "cgroups": False}}
 PROGRAMS = {"print": "print('up', flush=True)\n",
             "import asibot.client": "import asibot.client\nprint('up', flush=True)\n"}
-ESCAPE = """
-import os, subprocess, sys, time
-M = "{marker}"
-subprocess.Popen([sys.executable, "-c", "import os, time; os.setsid(); time.sleep(60)", M])
-pid = os.fork()
-if pid == 0:
-    os.setsid()
-    if os.fork() == 0:
-        os.execv(sys.executable, [sys.executable, "-c", "import time; time.sleep(60)", M])
-    os._exit(0)
-os.waitpid(pid, 0)
-def running():
-    n = 0
-    for p in os.listdir("/proc"):
-        try:
-            with open(f"/proc/{{p}}/cmdline", "rb") as f:
-                n += M.encode() in f.read()
-        except OSError:
-            pass
-    return n
-while running() < 2:
-    time.sleep(0.01)
-print("both up", flush=True)
-time.sleep(60)
-"""
-
-
-def marked(marker: str) -> list[int]:
-    found = []
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                if marker.encode() in (entry / "cmdline").read_bytes():
-                    state = (entry / "stat").read_text().rsplit(")", 1)[1].split()[0]
-                    if state not in ("Z", "X"):
-                        found.append(int(entry.name))
-            except OSError:
-                pass
-    return found
-
-
 class FirstLine:
     def __init__(self) -> None:
         self.event = threading.Event()
@@ -136,7 +96,7 @@ def stop_to_gone(mode: dict, folder: Path, runs: int) -> tuple[list[float], int]
         for _ in range(runs):
             marker = f"bench-escape-{uuid.uuid4().hex}"
             path = folder / "escape.py"
-            path.write_text(ESCAPE.format(marker=marker))
+            path.write_text(ESCAPING_PROGRAM.format(marker=marker, then="time.sleep(60)"))
             seen.clear()
             runner.start(path, "bench")
             deadline = time.monotonic() + 30
@@ -144,10 +104,10 @@ def stop_to_gone(mode: dict, folder: Path, runs: int) -> tuple[list[float], int]
                 time.sleep(0.005)
             t = time.perf_counter()
             runner.stop()
-            while marked(marker) and time.perf_counter() - t < 10:
+            while processes_with(marker) and time.perf_counter() - t < 10:
                 time.sleep(0.0005)
             times.append(time.perf_counter() - t)
-            left += len(marked(marker))
+            left += len(processes_with(marker))
     finally:
         runner.close()
     return times, left
@@ -158,7 +118,7 @@ def plain_stop(folder: Path, runs: int) -> tuple[list[float], int]:
     for _ in range(runs):
         marker = f"bench-escape-{uuid.uuid4().hex}"
         path = folder / "escape.py"
-        path.write_text(ESCAPE.format(marker=marker))
+        path.write_text(ESCAPING_PROGRAM.format(marker=marker, then="time.sleep(60)"))
         proc = subprocess.Popen([sys.executable, "-u", str(path)], cwd=folder, stdout=subprocess.PIPE,
                                 start_new_session=True)
         proc.stdout.readline()
@@ -166,7 +126,7 @@ def plain_stop(folder: Path, runs: int) -> tuple[list[float], int]:
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
         times.append(time.perf_counter() - t)
-        survivors = marked(marker)
+        survivors = processes_with(marker)
         left += len(survivors)
         for pid in survivors:
             os.kill(pid, signal.SIGKILL)

@@ -91,22 +91,20 @@ class DriverContract:
         self.not_holder = 0          # commands refused because they were not the holder's
         self.rejected = 0            # every command refused, for whatever reason
         self._status: Callable[[], dict] = dict
-        self._quiet: Callable[[Exception], bool] = lambda exc: False
+        self.estop: EStopState | None = None
 
     def serve(self, commands: Iterable[Command], *,
               on_holder: Callable[[str, str | None], None],
               on_estop: Callable[[bool, str, str], None],
               status: Callable[[], dict], reset_fault: Callable[[], dict],
-              verbs: dict[str, Callable[[dict], dict]] | None = None,
-              quiet: Callable[[Exception], bool] = lambda exc: False) -> None:
+              verbs: dict[str, Callable[[dict], dict]] | None = None) -> None:
         """Obey `commands` from their holders; `on_holder(part, id)` hears each change of a
         part's holder, `on_estop(engaged, reason, by)` each newer estop state; `status()` is the
         driver's own status, `reset_fault()` clears a fault (raising RpcError with the sentence
-        when it cannot). `quiet(exc)`: a refusal the driver's state explains (a command during
-        an estop) is counted and logged, not sent as an Event."""
+        when it cannot)."""
         bus, robot = self.bus, self.robot
         self.commands = list(commands)
-        self._status, self._quiet = status, quiet
+        self._status = status
         parts = sorted({c.kind.part for c in self.commands}, key=("arm", "base").index)
         self.holders = {part: Holder(robot, part, on_change=lambda h, part=part: on_holder(part, h))
                         for part in parts}
@@ -137,7 +135,9 @@ class DriverContract:
             try:
                 c.obey(msg)
             except (ValueError, CommandRefused) as exc:   # the driver's sentence
-                if self._quiet(exc):
+                # During an estop a command is refused by the stop, not for what it says:
+                # counted and logged, not an Event a second while a stream runs into it.
+                if self.estop is not None and self.estop.engaged and not isinstance(exc, CommandRefused):
                     self.rejected += 1
                     log.debug("ignored a %s command: %s", c.name, exc)
                 else:

@@ -77,6 +77,59 @@ def scheduling_delay(samples: int = 20, period: float = 0.005) -> float:
     return worst
 
 
+#: A program that escapes its process group two ways, a child that calls setsid() and a daemon
+#: (double fork, setsid, orphaned), both marked with `{marker}` in their command lines; it says
+#: "both up" once both run, then runs `{then}`. What the sandbox's Stop must end.
+ESCAPING_PROGRAM = """
+import os, subprocess, sys, time
+M = "{marker}"
+subprocess.Popen([sys.executable, "-c", "import os, time; os.setsid(); time.sleep(60)", M])
+pid = os.fork()
+if pid == 0:
+    os.setsid()
+    if os.fork() == 0:
+        os.execv(sys.executable, [sys.executable, "-c", "import time; time.sleep(60)", M])
+    os._exit(0)
+os.waitpid(pid, 0)
+
+def running():
+    n = 0
+    for p in os.listdir("/proc"):
+        try:
+            with open(f"/proc/{{p}}/cmdline", "rb") as f:
+                n += M.encode() in f.read()
+        except OSError:
+            pass
+    return n
+while running() < 2:
+    time.sleep(0.01)
+print("both up", flush=True)
+{then}
+"""
+
+
+def alive(pid: int) -> bool:
+    """Running, not a zombie (an orphan's zombie may wait for a busy init in a container)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+    return state not in ("Z", "X")
+
+
+def processes_with(marker: str) -> list[int]:
+    """The pids (this side's) of live processes with `marker` in their command line."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                if marker.encode() in (entry / "cmdline").read_bytes() and alive(int(entry.name)):
+                    found.append(int(entry.name))
+            except OSError:
+                pass
+    return found
+
+
 def release_counts_only_signed(bus: Any, robot: str, events: Callable[[str], list], by: str) -> None:
     """The driver contract's estop release, as a driver test checks it: a release that only
     writes a name (`by`) is refused with a `release_refused` Event; a signed one releases,

@@ -24,7 +24,6 @@ from asibot import messages as m
 from asibot.bus import Bus
 from asibot.driver_contract import DriverContract, command
 from asibot.errors import RpcError
-from asibot.events import CommandRefused
 from asibot.runtime import Service
 from asibot.sim import viewer
 from asibot.sim.arm import Notice
@@ -87,9 +86,7 @@ class SimService(Service):
             commands, on_holder=self.sim.set_controller, on_estop=self.sim.set_estop,
             status=self.sim.status, reset_fault=self._reset_fault,
             verbs={"reset_world": self._rpc_reset_world, "set_object_pose": self._rpc_set_object_pose,
-                   "object_pose": self._rpc_object_pose, "set_robot_pose": self._rpc_set_robot_pose},
-            # Commands during an estop are refused by the state, not by what they say: logged only.
-            quiet=lambda exc: self.sim.estop and not isinstance(exc, CommandRefused))
+                   "object_pose": self._rpc_object_pose, "set_robot_pose": self._rpc_set_robot_pose})
         self.holders = self.contract.holders
         self._threads = [threading.Thread(target=self._physics_loop, name="sim-physics", daemon=True)]
         if options.camera_hz > 0:

@@ -22,7 +22,7 @@ import pytest
 
 from asibot import access, keys, messages
 from asibot.bus import Bus, open_router
-from asibot.errors import AsibotError, NotAllowed, Unavailable
+from asibot.errors import NotAllowed, Unavailable
 from asibot.messages import ArmCommand, ArmState, EStop, Twist
 from asibot.testing import free_port, wait_until
 

@@ -21,7 +21,7 @@ class Recorder:
 
     def arm(self, cmd: ArmCommand) -> None:
         if cmd.values[0] == 2.5:
-            raise ValueError("quiet: the emergency stop is engaged")
+            raise ValueError("the emergency stop is engaged")
         if cmd.values[0] > 3.0:
             raise CommandRefused("position_limit", "joint q1 position 4 rad is beyond its upper limit 3 rad")
         if cmd.values[0] < -3.0:
@@ -39,8 +39,7 @@ def driver(memory_bus):
             on_holder=lambda part, holder: rec.holders((part, holder)),
             on_estop=lambda engaged, reason, by: rec.estops((engaged, reason, by)),
             status=lambda: {"mode": "idle"}, reset_fault=lambda: {"reset": True},
-            verbs={"inject_fault": lambda req: {"injected": req.get("fault")}},
-            quiet=lambda exc: isinstance(exc, ValueError) and "quiet" in str(exc))
+            verbs={"inject_fault": lambda req: {"injected": req.get("fault")}})
         events = Inbox()
         user.subscribe(keys.events(R), Event, events)
         arm = ownership.announce(user, R, "arm", "kinematics")
@@ -79,14 +78,20 @@ def test_the_holders_signed_commands_are_obeyed_and_the_rest_refused_with_a_sent
                                  "commands_rejected": 5}
 
 
-def test_a_refusal_the_state_explains_is_counted_not_shouted(driver):
+def test_during_an_estop_a_refusal_of_the_stop_is_counted_not_shouted(driver):
     contract, rec, user, events, arm, base = driver
     pub = user.publisher(keys.arm_command(R), ArmCommand)
-    arm.put(pub, ArmCommand(mode="position", values=[2.5] * 5))
+    user.latch(keys.estop(R), EStop(engaged=True, reason="test"))
+    wait_until(lambda: contract.estop.engaged, 5)
+    arm.put(pub, ArmCommand(mode="position", values=[2.5] * 5))   # refused by the stop
     wait_until(lambda: contract.rejected == 1, 5)
-    arm.put(pub, ArmCommand(mode="position", values=[4.0] * 5))
+    arm.put(pub, ArmCommand(mode="position", values=[4.0] * 5))   # beyond a limit: said even now
     wait_until(lambda: "bad_command" in codes(events), 5)
     assert codes(events) == ["bad_command"] and contract.rejected == 2
+    release(user, R)
+    wait_until(lambda: not contract.estop.engaged, 5)
+    arm.put(pub, ArmCommand(mode="position", values=[2.5] * 5))   # no stop: said
+    wait_until(lambda: codes(events).count("bad_command") == 2, 5)
 
 
 def test_status_verbs_estop_and_liveliness(driver):

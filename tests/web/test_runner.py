@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from asibot.testing import wait_until
+from asibot.testing import alive, processes_with, wait_until
 from asibot.web.runner import CUT_MARK, Limits, ProgramRunner, RunResult
 
 
@@ -59,28 +59,6 @@ def program(folder: Path, text: str, name: str = "prog.py") -> Path:
     path = folder / name
     path.write_text(textwrap.dedent(text).lstrip())
     return path
-
-
-def alive(pid: int) -> bool:
-    """Running, not a zombie (an orphan's zombie may wait for a busy init in a container)."""
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except (FileNotFoundError, ProcessLookupError):
-        return False
-    return state not in ("Z", "X")
-
-
-def processes_with(marker: str) -> list[int]:
-    """The pids (this side's) of live processes with `marker` in their command line."""
-    found = []
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                if marker.encode() in (entry / "cmdline").read_bytes() and alive(int(entry.name)):
-                    found.append(int(entry.name))
-            except OSError:
-                pass
-    return found
 
 
 def test_hello_world_output_and_finished(recorder, tmp_path):

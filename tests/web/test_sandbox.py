@@ -18,11 +18,11 @@ import pytest
 
 from asibot import access, keys, messages
 from asibot.bus import Bus, open_router
-from asibot.testing import free_port, wait_until
+from asibot.testing import ESCAPING_PROGRAM, free_port, processes_with, wait_until
 from asibot.web.runner import Limits, ProgramRunner, RunResult
 from asibot.web.sandbox import ACCESS_INSIDE, NOBODY, Sandbox, probe
 
-from .test_runner import alive, processes_with, program
+from .test_runner import program
 
 ROBOT = "sandbox-bot"
 
@@ -70,41 +70,13 @@ def make():
         r.runner.close()
 
 
-# A child that calls setsid() and a daemon (double fork, setsid, orphaned): both leave the
-# program's process group. The program waits until both run, then says so.
-ESCAPE = """
-    import os, subprocess, sys, time
-    M = "{marker}"
-    subprocess.Popen([sys.executable, "-c", "import os, time; os.setsid(); time.sleep(60)", M])
-    pid = os.fork()
-    if pid == 0:
-        os.setsid()
-        if os.fork() == 0:
-            os.execv(sys.executable, [sys.executable, "-c", "import time; time.sleep(60)", M])
-        os._exit(0)
-    os.waitpid(pid, 0)
-
-    def running():
-        n = 0
-        for p in os.listdir("/proc"):
-            try:
-                with open(f"/proc/{{p}}/cmdline", "rb") as f:
-                    n += M.encode() in f.read()
-            except OSError:
-                pass
-        return n
-    while running() < 2:
-        time.sleep(0.01)
-    print("both up", flush=True)
-    {then}
-"""
 
 
 @pytest.mark.parametrize("mode", MODES)
 def test_stop_ends_children_that_left_the_process_group(make, tmp_path, mode):
     r = make(**MODES[mode])
     marker = f"escape-{uuid.uuid4().hex}"
-    r.runner.start(program(tmp_path, ESCAPE.format(marker=marker, then="time.sleep(60)")), ROBOT)
+    r.runner.start(program(tmp_path, ESCAPING_PROGRAM.format(marker=marker, then="time.sleep(60)")), ROBOT)
     wait_until(lambda: "both up" in r.out(), timeout=20, message="the program's children never ran")
     assert len(processes_with(marker)) == 2
     r.runner.stop()   # what Stop and the estop call; it returns once every process is gone
@@ -117,7 +89,7 @@ def test_stop_ends_children_that_left_the_process_group(make, tmp_path, mode):
 def test_a_program_that_ends_takes_its_daemons_with_it(make, tmp_path, mode):
     r = make(**MODES[mode])
     marker = f"daemon-{uuid.uuid4().hex}"
-    result = r.run(program(tmp_path, ESCAPE.format(marker=marker, then="")))
+    result = r.run(program(tmp_path, ESCAPING_PROGRAM.format(marker=marker, then="")))
     assert "both up" in r.out()
     assert (result.reason, result.ok) == ("finished", True)
     assert processes_with(marker) == [], "a daemon outlived the program that started it"
