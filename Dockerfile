@@ -19,11 +19,11 @@ RUN apt-get update \
  && rm -rf /var/lib/apt/lists/*
 
 WORKDIR /app
-COPY pyproject.toml README.md ./
 COPY libs ./libs
 COPY services ./services
-COPY --from=web /web/static/vendor ./services/web/static/vendor
-RUN pip install .
+COPY --from=web /web/asibot/web/static/vendor ./services/web/asibot/web/static/vendor
+# Every package of the `asibot` namespace but the test helpers (libs/testing).
+RUN pip install ./libs/common ./libs/cli ./services/*/
 
 # Recordings and user data live in volumes, never in the image.
 ENV ASIBOT_DATA=/data

@@ -22,7 +22,8 @@ import uuid
 import can
 import numpy as np
 
-from asibot import keys, ownership, testing
+from asibot import keys, testing
+from asibot.safety import ownership
 from asibot.arm_driver import config, emulator
 from asibot.arm_driver.bitlength import exact_bits, worst_case_bits
 from asibot.arm_driver.service import ArmDriverService

@@ -13,7 +13,8 @@ import sys
 import time
 import timeit
 
-from asibot import keys, ownership, testing
+from asibot import keys, testing
+from asibot.safety import ownership
 from asibot.bus import Bus
 from asibot.messages import Twist
 

@@ -22,7 +22,7 @@ import zenoh
 from asibot import messages as m
 from asibot.bus import Bus
 from asibot.bus.zenoh_backend import client_config
-from asibot.recording.recorder import RecorderService
+from asibot.recorder.recorder import RecorderService
 from asibot.testing import router
 
 ECHO = r"""

@@ -1,4 +1,4 @@
-"""What signed commands cost (asibot.identity), beside unsigned ones measured in the same run.
+"""What signed commands cost (asibot.safety.identity), beside unsigned ones measured in the same run.
 
 A controller signs every ArmCommand it sends and the driver checks the signature and the
 sequence number before it obeys (`Controller.put`, `Holder.refusal`). Measured here: the CPU
@@ -25,7 +25,8 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 from table import print_table, times  # noqa: E402
 
-from asibot import keys, ownership  # noqa: E402
+from asibot import keys  # noqa: E402
+from asibot.safety import ownership
 from asibot.bus import Bus  # noqa: E402
 from asibot.messages import ArmCommand  # noqa: E402
 from asibot.testing import memory_bus, wait_until  # noqa: E402

@@ -31,7 +31,8 @@ from typing import Callable, TextIO
 
 import numpy as np
 
-from asibot import keys, messages, ownership, testing
+from asibot import keys, messages, testing
+from asibot.safety import ownership
 from asibot.bus import Bus
 from asibot.client import CartesianClient
 from asibot.errors import RpcError
@@ -54,7 +55,8 @@ FUZZ_REQUESTS = 4000
 FUZZ_QUARTERS = 4
 SENDER = """
 import sys, time
-from asibot import keys, ownership, testing
+from asibot import keys, testing
+from asibot.safety import ownership
 from asibot.bus import Bus
 from asibot.messages import Twist
 robot, vx = sys.argv[1], float(sys.argv[2])
@@ -254,7 +256,7 @@ def stream_then(pub_send: Callable[[], None], trace: Trace, end: Callable[["test
         time.sleep(rng.uniform(0.0, SIP_PERIOD))      # a random phase of the SIP cycle
         t0 = end(stream)
         latency = stop_latency(trace, t0, base_still, 1.5)
-    time.sleep(COMMAND_WATCHDOG_S)      # the next stream is a new one (asibot.arming)
+    time.sleep(COMMAND_WATCHDOG_S)      # the next stream is a new one (asibot.safety.arming)
     return latency
 
 

@@ -11,7 +11,8 @@ from dataclasses import dataclass, field
 import can
 import pytest
 
-from asibot import keys, ownership
+from asibot import keys
+from asibot.safety import ownership
 from asibot.arm_driver import config, emulator
 from asibot.arm_driver.driver import ArmDriver
 from asibot.arm_driver.master import CanopenMaster
@@ -129,7 +130,7 @@ def _close(r: Rig) -> None:
 class ArmOnBus:
     """The arm driver service and a user on the in-memory bus; `controller` is the id of a
     controller (announced on `controller_bus`: close it and it vanishes) that holds the arm:
-    the commands of the tests carry it (asibot.ownership)."""
+    the commands of the tests carry it (asibot.safety.ownership)."""
     svc: ArmDriverService
     user: Bus
     states: Inbox

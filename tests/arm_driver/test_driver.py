@@ -10,7 +10,7 @@ import can
 import pytest
 
 from asibot.arm_driver.driver import FaultError
-from asibot.arming import NotReady
+from asibot.safety.arming import NotReady
 from asibot.messages import COMMAND_WATCHDOG_S
 from asibot.testing import Stream, wait_until
 
@@ -101,7 +101,7 @@ def test_estop_holds_ignores_commands_and_resumes_after_release(rig):
     settles(rig)
     held = rig.emu.positions()[1]
     assert abs(held - at_estop) < 0.3 * 0.2
-    time.sleep(COMMAND_WATCHDOG_S)    # the next command is a new request, not FAR's stream (asibot.arming)
+    time.sleep(COMMAND_WATCHDOG_S)    # the next command is a new request, not FAR's stream (asibot.safety.arming)
     d.set_estop(False)
     assert d.command("position", [held + 0.01, 0, 0, 0, 0])
     wait_until(lambda: abs(rig.emu.positions()[1] - (held + 0.01)) < 1e-4, 3)

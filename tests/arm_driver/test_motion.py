@@ -8,7 +8,7 @@ import re
 import pytest
 
 from asibot.arm_driver.motion import POSITION_TOLERANCE_RAD, VELOCITY_TOLERANCE, JointReference
-from asibot.events import CommandRefused
+from asibot.safety.events import CommandRefused
 
 V = math.radians(25)
 

@@ -1,6 +1,6 @@
 """Issue 10, finding 1 and 4: the arm driver obeys only the controller that holds the arm
-(asibot.ownership), a new holder's stream from before does not move the arm (asibot.arming),
-and the estop it obeys outlives whoever engaged it (asibot.estop).
+(asibot.safety.ownership), a new holder's stream from before does not move the arm (asibot.safety.arming),
+and the estop it obeys outlives whoever engaged it (asibot.safety.estop).
 
 The service with its five emulated drives in this process, on the in-memory bus."""
 
@@ -10,7 +10,8 @@ import time
 
 import pytest
 
-from asibot import keys, messages, ownership
+from asibot import keys, messages
+from asibot.safety import ownership
 from asibot.bus import Bus
 from asibot.messages import COMMAND_WATCHDOG_S, ArmCommand, EStop
 from asibot.testing import Inbox, Stream, wait_until, release_counts_only_signed

@@ -10,7 +10,8 @@ import time
 
 import pytest
 
-from asibot import keys, ownership
+from asibot import keys
+from asibot.safety import ownership
 from asibot.bus import Bus
 from asibot.errors import RpcError
 from asibot.messages import ArmCommand, ArmState, EStop, Event
@@ -49,7 +50,7 @@ def test_driver_contract_end_to_end(driver_process):
     assert len(states) - n >= 25
 
     # Positions through Zenoh -> CAN -> emulated drives -> TPDO -> arm/state, from the
-    # controller that holds the arm (asibot.ownership).
+    # controller that holds the arm (asibot.safety.ownership).
     controller = Bus("fake-controller", wait=5)
     c = ownership.announce(controller, R, "arm", "test")
     wait_until(lambda: bus.call(keys.driver_rpc(R, "status"))["holders"]["arm"] == c.id, 5)

@@ -1,5 +1,5 @@
 """Test doubles serving the real RPC keys with the real services' reply shapes:
-nav (services/nav/service.py and pilot.py), kinematics (services/kinematics/server.py), the
+nav (services/nav/asibot/nav/service.py and pilot.py), kinematics (services/kinematics/asibot/kinematics/server.py), the
 Task Creator's tasks (keys.tasks_rpc, served by the web service)."""
 
 from __future__ import annotations

@@ -7,7 +7,8 @@ from dataclasses import dataclass
 
 import pytest
 
-from asibot import keys, ownership
+from asibot import keys
+from asibot.safety import ownership
 from asibot.base_driver.emulator import ArcosEmulator
 from asibot.base_driver.emulator.robot import EmulatedP3at
 from asibot.base_driver.service import BaseDriverService
@@ -70,7 +71,7 @@ def emulator():
 class BaseOnBus:
     """The base driver service and a user on the in-memory bus; `controller` is the id of a
     controller (announced on `controller_bus`: close it and it vanishes) that holds the base:
-    the cmd_vel of the tests carry it (asibot.ownership)."""
+    the cmd_vel of the tests carry it (asibot.safety.ownership)."""
     svc: BaseDriverService
     user: Bus
     odom: Inbox

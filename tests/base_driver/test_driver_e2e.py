@@ -15,7 +15,7 @@ from asibot.base_driver.driver import SPEED_TOLERANCE, BaseDriver
 from asibot.base_driver.emulator import ArcosEmulator
 from asibot.base_driver.sip import parse_sip
 from asibot.errors import RpcError
-from asibot.events import CommandRefused
+from asibot.safety.events import CommandRefused
 from asibot.messages import COMMAND_WATCHDOG_S
 from asibot.testing import wait_until
 
@@ -130,7 +130,7 @@ def test_estop_sends_e_stop_and_refuses_motion_until_released(rig):
     assert rec.codes().count("estop") == 1
     drv.set_estop(True, "again")                   # latched: no second event
     assert rec.codes().count("estop") == 1
-    time.sleep(COMMAND_WATCHDOG_S)                 # the next cmd_vel is a new request (asibot.arming)
+    time.sleep(COMMAND_WATCHDOG_S)                 # the next cmd_vel is a new request (asibot.safety.arming)
     drv.set_estop(False)
     assert drv.cmd_vel(0.3, 0.0) is True
     wait_until(lambda: emu.robot.target_vel == 300, 1)

@@ -1,7 +1,7 @@
 """Issue 10, finding 1 and 4, for the Pioneer: the driver obeys only the controller that holds
-the base (asibot.ownership); a cmd_vel stream that keeps coming through a pulled cable or an
-estop does not drive the base when it is back until the stream pauses (asibot.arming); the
-estop outlives whoever engaged it (asibot.estop).
+the base (asibot.safety.ownership); a cmd_vel stream that keeps coming through a pulled cable or an
+estop does not drive the base when it is back until the stream pauses (asibot.safety.arming); the
+estop outlives whoever engaged it (asibot.safety.estop).
 
 The service on the in-memory bus against the ARCOS emulator (a P3-AT over TCP)."""
 
@@ -11,7 +11,8 @@ import time
 
 import pytest
 
-from asibot import keys, messages, ownership
+from asibot import keys, messages
+from asibot.safety import ownership
 from asibot.bus import Bus
 from asibot.messages import COMMAND_WATCHDOG_S, EStop, Twist
 from asibot.testing import Inbox, Stream, wait_until, release, release_counts_only_signed

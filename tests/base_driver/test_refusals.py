@@ -11,7 +11,7 @@ import time
 import pytest
 
 from asibot import keys, messages
-from asibot.events import stands_for
+from asibot.safety.events import stands_for
 from asibot.messages import Event, Twist
 from asibot.testing import Inbox, wait_until, signed_raw
 

@@ -14,7 +14,8 @@ import time
 
 import pytest
 
-from asibot import keys, ownership
+from asibot import keys
+from asibot.safety import ownership
 from asibot.bus import Bus
 from asibot.errors import RpcError
 from asibot.messages import Battery, Bumpers, EStop, Event, Odometry, Sonar, Twist

@@ -210,7 +210,7 @@ def test_an_open_router_is_unchanged(router, monkeypatch):
 
 
 def _cli(*argv: str, env: dict[str, str]) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "asibot.cli", *argv], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "asibot.cli.main", *argv], capture_output=True, text=True,
                           timeout=60, env=env)
 
 
@@ -278,7 +278,7 @@ def test_asibot_up_with_access_makes_the_logins_and_admits_only_them(tmp_path):
                ASIBOT_RECORDINGS=str(tmp_path / "recordings"))
     env.pop(access.ROLE_ENV, None)
     tls = free_port()
-    up = subprocess.Popen([sys.executable, "-m", "asibot.cli", "up", "--access", "--only", "recorder",
+    up = subprocess.Popen([sys.executable, "-m", "asibot.cli.main", "up", "--access", "--only", "recorder",
                            "--tls", f"127.0.0.1:{tls}"],
                           cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     lines: list[str] = []

@@ -1,6 +1,6 @@
-"""asibot.arming: after a recovery, only a stream that began after it moves the robot."""
+"""asibot.safety.arming: after a recovery, only a stream that began after it moves the robot."""
 
-from asibot.arming import Arming, NotReady
+from asibot.safety.arming import Arming, NotReady
 
 W = 0.2   # the watchdog period of these tests
 

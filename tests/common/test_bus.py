@@ -120,7 +120,7 @@ def test_services_reconnect_after_a_router_restart(tmp_path, monkeypatch):
     monkeypatch.setenv("ASIBOT_ROUTER", endpoint)
 
     def start_router() -> subprocess.Popen:
-        p = subprocess.Popen([sys.executable, "-m", "asibot.cli", "router", "--listen", endpoint],
+        p = subprocess.Popen([sys.executable, "-m", "asibot.cli.main", "router", "--listen", endpoint],
                              stdout=subprocess.PIPE, text=True)
         assert "listening" in p.stdout.readline()
         return p

@@ -11,7 +11,7 @@ from asibot.errors import RpcError
 
 
 def asibot(*argv: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "asibot.cli", *argv], capture_output=True, text=True, timeout=60)
+    return subprocess.run([sys.executable, "-m", "asibot.cli.main", *argv], capture_output=True, text=True, timeout=60)
 
 
 class Driver:

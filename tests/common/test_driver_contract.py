@@ -1,12 +1,13 @@
-"""asibot.driver_contract: the bus side every driver shares, with a driver that only records."""
+"""asibot.safety.driver_contract: the bus side every driver shares, with a driver that only records."""
 
 import pytest
 
-from asibot import keys, messages, ownership
+from asibot import keys, messages
+from asibot.safety import ownership
 from asibot.bus import Bus
-from asibot.driver_contract import DriverContract, command
-from asibot.arming import NotReady
-from asibot.events import CommandRefused
+from asibot.safety.driver_contract import DriverContract, command
+from asibot.safety.arming import NotReady
+from asibot.safety.events import CommandRefused
 from asibot.messages import ArmCommand, EStop, Event, Twist
 from asibot.testing import Inbox, release, wait_until
 

@@ -1,12 +1,13 @@
-"""asibot.estop: the latched estop outlives whoever engaged it, since every process that obeys
+"""asibot.safety.estop: the latched estop outlives whoever engaged it, since every process that obeys
 it keeps serving it; a restarted driver learns it from the controller."""
 
 import dataclasses
 
-from asibot import estop, identity, keys
+from asibot.safety import estop, identity
+from asibot import keys
 from asibot.bus import Bus
-from asibot.estop import EStopState, who
-from asibot.identity import Identity
+from asibot.safety.estop import EStopState, who
+from asibot.safety.identity import Identity
 from asibot.messages import EStop
 from asibot.testing import Inbox, wait_until
 

@@ -54,7 +54,7 @@ def test_service_keys_parse_back_and_the_patterns_match_them():
 
 
 def test_status_without_a_router_says_so(monkeypatch, capsys):
-    from asibot.cli import main
+    from asibot.cli.main import main
     from asibot.testing import free_port
     monkeypatch.setenv("ASIBOT_ROUTER", f"tcp/127.0.0.1:{free_port()}")
     assert main(["status", "--wait", "0.5"]) == 1

@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from asibot import compose
-from asibot.launcher import Supervisor
+from asibot.cli import compose
+from asibot.cli.launcher import Supervisor
 from asibot.testing import free_port, wait_until
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -137,13 +137,13 @@ def test_asibot_up_status_and_ctrl_c(tmp_path):
     shutil.copy(COMPOSE, tmp_path / "compose.yaml")
     elsewhere = tmp_path / "elsewhere"
     env = dict(os.environ, ASIBOT_ROUTER=f"tcp/127.0.0.1:{free_port()}", ASIBOT_RECORDINGS=str(elsewhere))
-    up = subprocess.Popen([sys.executable, "-m", "asibot.cli", "up", "--only", "recorder"],
+    up = subprocess.Popen([sys.executable, "-m", "asibot.cli.main", "up", "--only", "recorder"],
                           cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     lines: list[str] = []
     threading.Thread(target=lambda: lines.extend(up.stdout), daemon=True).start()
     try:
         def status() -> str:
-            r = subprocess.run([sys.executable, "-m", "asibot.cli", "status"], env=env,
+            r = subprocess.run([sys.executable, "-m", "asibot.cli.main", "status"], env=env,
                                capture_output=True, text=True)
             return r.stdout if r.returncode == 0 and "recorder" in r.stdout else ""
         out = wait_until(status, 20, interval=0.3)
@@ -156,19 +156,19 @@ def test_asibot_up_status_and_ctrl_c(tmp_path):
     assert "recorder | " in text and "asibot   | stopped" in text and f"recordings in {elsewhere}" in text
     recordings = list(elsewhere.glob("*.mcap"))
     assert len(recordings) == 1 and not (tmp_path / "recordings").exists()
-    listing = subprocess.run([sys.executable, "-m", "asibot.cli", "recordings"], cwd=tmp_path,
+    listing = subprocess.run([sys.executable, "-m", "asibot.cli.main", "recordings"], cwd=tmp_path,
                              capture_output=True, text=True, env=env).stdout
     assert recordings[0].name in listing
 
 
 def test_up_refuses_a_second_instance_on_the_same_port(router, tmp_path):
-    r = subprocess.run([sys.executable, "-m", "asibot.cli", "up", "--file", str(COMPOSE)],
+    r = subprocess.run([sys.executable, "-m", "asibot.cli.main", "up", "--file", str(COMPOSE)],
                        capture_output=True, text=True, timeout=20)
     assert r.returncode == 1 and "already listens" in r.stderr
 
 
 def test_up_with_an_unknown_service_is_a_sentence():
-    r = subprocess.run([sys.executable, "-m", "asibot.cli", "up", "--file", str(COMPOSE), "--only", "nope"],
+    r = subprocess.run([sys.executable, "-m", "asibot.cli.main", "up", "--file", str(COMPOSE), "--only", "nope"],
                        capture_output=True, text=True, timeout=20,
                        env=dict(os.environ, ASIBOT_ROUTER=f"tcp/127.0.0.1:{free_port()}"))
     assert r.returncode == 2 and "no service named nope" in r.stderr and "Traceback" not in r.stderr

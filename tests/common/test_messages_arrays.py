@@ -9,7 +9,7 @@ import pytest
 
 from asibot import messages as m
 from asibot.errors import MessageError
-from asibot.recording.reader import iter_messages
+from asibot.recorder.reader import iter_messages
 
 FIXTURES = Path(__file__).resolve().parents[2] / "recordings" / "fixtures"
 

@@ -1,13 +1,14 @@
-"""asibot.ownership: which controller holds a part of a robot, from the liveliness tokens."""
+"""asibot.safety.ownership: which controller holds a part of a robot, from the liveliness tokens."""
 
 import dataclasses
 import time
 
 import pytest
 
-from asibot import identity, keys, ownership
+from asibot.safety import identity, ownership
+from asibot import keys
 from asibot.bus import Bus
-from asibot.identity import Identity
+from asibot.safety.identity import Identity
 from asibot.messages import ArmCommand, GripperCommand, Twist
 from asibot.testing import wait_until
 

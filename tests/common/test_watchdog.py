@@ -1,9 +1,9 @@
-"""asibot.watchdog: a stream that stops arriving stops the robot, once per silence."""
+"""asibot.safety.watchdog: a stream that stops arriving stops the robot, once per silence."""
 
 import pytest
 
 from asibot.messages import COMMAND_WATCHDOG_S
-from asibot.watchdog import Watchdog
+from asibot.safety.watchdog import Watchdog
 
 
 def test_it_fires_once_per_silence_while_something_moves():

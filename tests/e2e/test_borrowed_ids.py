@@ -7,7 +7,8 @@ import time
 
 import pytest
 
-from asibot import identity, keys
+from asibot.safety import identity
+from asibot import keys
 from asibot.client import CartesianClient
 from asibot.messages import ArmState, Event, Odometry
 from asibot.testing import Inbox, wait_until

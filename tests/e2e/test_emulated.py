@@ -5,7 +5,8 @@ import time
 
 import pytest
 
-from asibot import keys, ownership
+from asibot import keys
+from asibot.safety import ownership
 from asibot.client import CartesianClient
 from asibot.messages import ArmState, Odometry, Twist
 from asibot.testing import wait_until
@@ -30,7 +31,7 @@ def test_the_emulated_profile_drives_both_robots(up):
     assert states and states[-1].positions[0] == pytest.approx(0.1745, abs=0.005)
 
     # The base: ARCOS over TCP to the emulated P3-AT, cmd_vel in (from the controller that
-    # holds the base: this test, asibot.ownership), odometry out.
+    # holds the base: this test, asibot.safety.ownership), odometry out.
     controller = ownership.announce(stack.bus, "pioneer", "base", "test")
     wait_until(lambda: stack.bus.call(keys.driver_rpc("pioneer", "status"))["holders"]["base"] == controller.id, 10)
     odom: list[Odometry] = []

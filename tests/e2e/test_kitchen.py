@@ -3,7 +3,7 @@
 import pytest
 
 from asibot import keys
-from asibot.recording.reader import summarize
+from asibot.recorder.reader import summarize
 
 from .conftest import EXAMPLES
 

@@ -202,7 +202,7 @@ def test_each_named_place_is_reached(stack):
 @pytest.mark.timeout(300)
 def test_the_command_line_sends_the_robot_and_lists_places(stack):
     def nav(*args: str) -> subprocess.CompletedProcess:
-        return subprocess.run([sys.executable, "-m", "asibot.cli", "nav", *args], env=stack.env,
+        return subprocess.run([sys.executable, "-m", "asibot.cli.main", "nav", *args], env=stack.env,
                               capture_output=True, text=True, timeout=120)
     out = nav("places")
     assert out.returncode == 0 and "fridge" in out.stdout and "charging station" in out.stdout

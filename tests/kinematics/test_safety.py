@@ -1,6 +1,6 @@
 """Issue 10, findings 1 and 4, on the controller's side: `stop()` stops the arm whoever moved
 it, and a movv stream that keeps arriving through a controller restart or an estop release
-moves nothing until it pauses for one watchdog period (asibot.arming); a movj after the
+moves nothing until it pauses for one watchdog period (asibot.safety.arming); a movj after the
 recovery moves at once (a new request)."""
 
 import threading

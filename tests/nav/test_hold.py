@@ -1,9 +1,9 @@
 """Nav's first motion waits until the base driver names nav as the base's holder.
 
 Nav's first Twist can reach the driver a few ms before nav's liveliness token does. Refused
-then, it makes the whole primitive "a stream from before" the takeover (asibot.arming), and a
+then, it makes the whole primitive "a stream from before" the takeover (asibot.safety.arming), and a
 primitive sent just after nav started would never move the base: the same race that made a
-movj do nothing right after the kinematics service started (asibot.ownership.HoldWait).
+movj do nothing right after the kinematics service started (asibot.safety.ownership.HoldWait).
 """
 
 from __future__ import annotations
@@ -13,7 +13,8 @@ import time
 
 import pytest
 
-from asibot import identity, keys, ownership
+from asibot.safety import identity, ownership
+from asibot import keys
 from asibot import messages as m
 from asibot.bus import Bus
 from asibot.client import NavClient

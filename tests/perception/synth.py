@@ -16,7 +16,7 @@ from asibot import messages as m
 from asibot.perception.rays import CameraRays
 from asibot.poses import quaternion_wxyz
 
-FRONT = (0.32, 0.0, 0.3)      # the sim's front depth camera (services/sim/worlds/apartment.xml)
+FRONT = (0.32, 0.0, 0.3)      # the sim's front depth camera (services/sim/asibot/sim/worlds/apartment.xml)
 BACK = (-0.32, 0.0, 0.3)
 
 

@@ -1,5 +1,5 @@
 """Against the real sim, in process: the apartment's depth cameras rendered at known poses, turned
-into a scan, compared with the geometry of the world file (services/sim/worlds/apartment.xml)."""
+into a scan, compared with the geometry of the world file (services/sim/asibot/sim/worlds/apartment.xml)."""
 
 import math
 import os

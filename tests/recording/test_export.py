@@ -19,12 +19,12 @@ import pytest
 from mcap.reader import make_reader
 
 from asibot import keys, messages as m
-from asibot.cli import main as asibot
+from asibot.cli.main import main as asibot
 from asibot.poses import point_rotation
-from asibot.recording import export
-from asibot.recording.export import export_foxglove
-from asibot.recording.reader import NotARecording
-from asibot.recording.writer import LeanWriter
+from asibot.recorder import export
+from asibot.recorder.export import export_foxglove
+from asibot.recorder.reader import NotARecording
+from asibot.recorder.writer import LeanWriter
 
 T0 = 1_795_000_000_123_456_789
 ROBOT, BASE = "asibot-sim", "pioneer-sim"

@@ -19,11 +19,11 @@ import pytest
 from mcap.reader import make_reader
 
 from asibot import keys, messages as m
-from asibot.cli import main as asibot
-from asibot.recording import export
-from asibot.recording.export import ExportSummary, export_foxglove
-from asibot.recording.live import being_written
-from asibot.recording.recorder import McapRecorder
+from asibot.cli.main import main as asibot
+from asibot.recorder import export
+from asibot.recorder.export import ExportSummary, export_foxglove
+from asibot.recorder.live import being_written
+from asibot.recorder.recorder import McapRecorder
 from asibot.testing import wait_until
 
 KEY = keys.arm_state("live")
@@ -36,7 +36,7 @@ T0 = 1_795_000_000_000_000_000
 WRITER = f"""
 import sys, time
 from asibot import messages as m
-from asibot.recording.recorder import McapRecorder
+from asibot.recorder.recorder import McapRecorder
 path, batches, end = sys.argv[1], int(sys.argv[2]), sys.argv[3]
 rec = McapRecorder(path, flush_period=3600)
 i = 0
@@ -215,7 +215,7 @@ def test_the_command_says_a_live_recording_was_exported_up_to_its_start(tmp_path
 def test_the_command_follows_until_ctrl_c(tmp_path, writer):
     w = writer(batches=2, end="hold")
     out = tmp_path / "out.mcap"
-    cli = subprocess.Popen([sys.executable, "-m", "asibot.cli", "export", str(w.path), "--follow", "-o", str(out)],
+    cli = subprocess.Popen([sys.executable, "-m", "asibot.cli.main", "export", str(w.path), "--follow", "-o", str(out)],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         w.next_batch()

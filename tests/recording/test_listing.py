@@ -15,11 +15,11 @@ import pytest
 from mcap.reader import make_reader
 
 from asibot import keys, messages as m
-from asibot.cli import main as asibot
-from asibot.recording import index, reader
-from asibot.recording.reader import Reading, iter_messages, summarize
-from asibot.recording.recorder import McapRecorder
-from asibot.recording.writer import LeanWriter
+from asibot.cli.main import main as asibot
+from asibot.recorder import index, reader
+from asibot.recorder.reader import Reading, iter_messages, summarize
+from asibot.recorder.recorder import McapRecorder
+from asibot.recorder.writer import LeanWriter
 
 T0 = 1_795_000_000_000_000_000
 ARM, DEPTH, ODOM = keys.arm_state("lst"), keys.camera_depth("lst", "front"), keys.base_odom("lst")

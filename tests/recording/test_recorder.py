@@ -10,15 +10,15 @@ import pytest
 
 from asibot import keys, messages as m
 from asibot.bus import Bus
-from asibot.cli import main as asibot
-from asibot.recording.reader import NotARecording, iter_messages, list_recordings, summarize
-from asibot.recording.recorder import McapRecorder
-from asibot.recording.replay import replay
+from asibot.cli.main import main as asibot
+from asibot.recorder.reader import NotARecording, iter_messages, list_recordings, summarize
+from asibot.recorder.recorder import McapRecorder
+from asibot.recorder.replay import replay
 from asibot.testing import scheduling_delay, wait_until
 
 
 def start_recorder(directory: Path) -> subprocess.Popen:
-    p = subprocess.Popen([sys.executable, "-m", "asibot.recording", "--dir", str(directory)],
+    p = subprocess.Popen([sys.executable, "-m", "asibot.recorder", "--dir", str(directory)],
                          stderr=subprocess.PIPE, text=True)
     for line in p.stderr:
         if "running" in line:

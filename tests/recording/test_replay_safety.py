@@ -7,7 +7,7 @@ from pathlib import Path
 
 from asibot import keys, messages as m
 from asibot.bus import Bus
-from asibot.recording.replay import LiveGuard, replay
+from asibot.recorder.replay import LiveGuard, replay
 from asibot.testing import wait_until
 
 RED_CAN = Path(__file__).parents[2] / "recordings" / "fixtures" / "red_can.mcap"
@@ -15,7 +15,7 @@ ROBOT = "asibot-sim"  # the robot of the fixture
 
 
 def asibot(*argv: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "asibot.cli", *argv], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "asibot.cli.main", *argv], capture_output=True, text=True,
                           timeout=120)
 
 

@@ -12,9 +12,9 @@ import pytest
 
 from asibot import keys, messages as m
 from asibot.bus import Bus
-from asibot.recording.reader import iter_messages, summarize
-from asibot.recording.recorder import McapRecorder, RecorderService, Session, build, add_arguments, byte_size
-from asibot.recording.rotation import DAY_S, FileInfo, Retention, over_limits, prune
+from asibot.recorder.reader import iter_messages, summarize
+from asibot.recorder.recorder import McapRecorder, RecorderService, Session, build, add_arguments, byte_size
+from asibot.recorder.rotation import DAY_S, FileInfo, Retention, over_limits, prune
 from asibot.testing import wait_until
 
 NOW = 1_800_000_000.0

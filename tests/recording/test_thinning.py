@@ -9,9 +9,9 @@ import pytest
 
 from asibot import keys, messages as m
 from asibot.bus import Bus
-from asibot.recording.reader import iter_messages
-from asibot.recording.recorder import RecorderService
-from asibot.recording.thinning import CameraThinner, is_camera_image
+from asibot.recorder.reader import iter_messages
+from asibot.recorder.recorder import RecorderService
+from asibot.recorder.thinning import CameraThinner, is_camera_image
 from asibot.testing import wait_until
 
 ROBOT = "thin"

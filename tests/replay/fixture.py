@@ -5,8 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Iterable
 
-from asibot.recording.reader import Record
-from asibot.recording.writer import LeanWriter
+from asibot.recorder.reader import Record
+from asibot.recorder.writer import LeanWriter
 
 
 def write_fixture(path: Path, label: str, records: Iterable[Record]) -> None:

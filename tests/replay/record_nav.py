@@ -20,7 +20,7 @@ from pathlib import Path
 
 from asibot import keys
 from asibot.client import NavClient
-from asibot.recording.reader import iter_messages
+from asibot.recorder.reader import iter_messages
 from asibot.testing import Stack, wait_until
 
 from fixture import write_fixture   # tests/replay/fixture.py, beside this script

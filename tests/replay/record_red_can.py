@@ -15,7 +15,7 @@ import tempfile
 from pathlib import Path
 
 from asibot import keys
-from asibot.recording.reader import iter_messages
+from asibot.recorder.reader import iter_messages
 
 from fixture import write_fixture   # tests/replay/fixture.py, beside this script
 

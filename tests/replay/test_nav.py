@@ -26,7 +26,7 @@ from asibot.perception.depth_to_scan import DepthToScan
 from asibot.perception.merge import ScanGrid, merge
 from asibot.perception.rays import CameraRays
 from asibot.perception.sonar import SonarRing
-from asibot.recording.reader import iter_messages, summarize
+from asibot.recorder.reader import iter_messages, summarize
 
 ROOT = Path(__file__).resolve().parents[2]
 ROBOT = "pioneer-sim"

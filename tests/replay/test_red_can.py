@@ -16,7 +16,7 @@ import pytest
 
 from asibot import keys, messages as m, robots
 from asibot.kinematics.model import solver_for
-from asibot.recording.reader import iter_messages, summarize
+from asibot.recorder.reader import iter_messages, summarize
 
 ROBOT = "asibot-sim"
 FIXTURE = Path(__file__).resolve().parents[2] / "recordings" / "fixtures" / "red_can.mcap"

@@ -6,7 +6,8 @@ from dataclasses import dataclass
 
 import pytest
 
-from asibot import keys, ownership, robots
+from asibot import keys, robots
+from asibot.safety import ownership
 from asibot import messages as m
 from asibot.bus import Bus
 from asibot.sim.service import Options, SimService
@@ -35,7 +36,7 @@ def apartment() -> Simulation:
 class SimOnBus:
     """The sim service (real time, no cameras) and a user on the in-memory bus. The test holds
     the arm and the base with the controllers `arm_controller` and `base_controller`
-    (announced on `controller_bus`): its commands carry their ids (asibot.ownership)."""
+    (announced on `controller_bus`): its commands carry their ids (asibot.safety.ownership)."""
     svc: SimService
     user: Bus
     arm: Inbox

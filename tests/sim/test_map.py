@@ -18,7 +18,7 @@ def load_committed():
 def test_committed_map_equals_a_fresh_generation(tmp_path):
     pgm, yml = make_map.write("apartment", tmp_path)
     meta, raw = load_committed()
-    assert pgm.read_bytes() == raw, "services/sim/maps/apartment.pgm is stale: run python -m asibot.sim.make_map"
+    assert pgm.read_bytes() == raw, "libs/common/asibot/maps/apartment.pgm is stale: run python -m asibot.sim.make_map"
     assert yaml.safe_load(yml.read_text()) == meta
 
 

@@ -1,7 +1,7 @@
 """Issue 10, finding 1 and 4, for the sim (it keeps the driver contract): only the controller
-that holds a part moves it (asibot.ownership); a stream that keeps coming through an estop
-moves nothing after the release until it pauses (asibot.arming); the estop outlives whoever
-engaged it (asibot.estop).
+that holds a part moves it (asibot.safety.ownership); a stream that keeps coming through an estop
+moves nothing after the release until it pauses (asibot.safety.arming); the estop outlives whoever
+engaged it (asibot.safety.estop).
 
 The sim service in this process (real time, no cameras) on the in-memory bus."""
 
@@ -11,7 +11,8 @@ import time
 
 import pytest
 
-from asibot import keys, ownership
+from asibot import keys
+from asibot.safety import ownership
 from asibot import messages as m
 from asibot.bus import Bus
 from asibot.testing import Inbox, Stream, wait_until, release, release_counts_only_signed

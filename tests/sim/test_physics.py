@@ -230,6 +230,6 @@ def test_a_fault_is_reported_and_reset(kitchen):
     assert kitchen.arm_state().mode == "fault" and kitchen.arm_state().fault
     kitchen.reset_fault()
     assert "ready" in [n.code for n in drain(kitchen)]
-    kitchen.step(int(COMMAND_WATCHDOG_S / kitchen.dt) + 1)   # a new request (asibot.arming)
+    kitchen.step(int(COMMAND_WATCHDOG_S / kitchen.dt) + 1)   # a new request (asibot.safety.arming)
     kitchen.command_arm(ArmCommand(mode="position", values=[0.1, 0, 0, 0, 0]))
     assert kitchen.arm_state().mode == "position"

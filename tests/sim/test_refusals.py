@@ -13,7 +13,7 @@ import pytest
 
 from asibot import keys
 from asibot import messages as m
-from asibot.events import stands_for
+from asibot.safety.events import stands_for
 from asibot.testing import Inbox, wait_until, signed_raw
 
 from .conftest import ROBOT

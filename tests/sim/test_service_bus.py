@@ -9,7 +9,8 @@ import time
 import numpy as np
 import pytest
 
-from asibot import keys, ownership
+from asibot import keys
+from asibot.safety import ownership
 from asibot import messages as m
 from asibot.bus import Bus
 from asibot.errors import RpcError
@@ -63,7 +64,7 @@ def test_the_sim_process_speaks_the_driver_contract(sim_process):
         bus.subscribe(keys.camera_depth(ROBOT, "front"), m.DepthImage, depth)
         bus.subscribe(keys.camera_info(ROBOT, "front"), m.CameraInfo, info)
         wait_until(lambda: arm.last() is not None and depth.last() is not None, timeout=10)
-        # The test holds the arm and the base (asibot.ownership).
+        # The test holds the arm and the base (asibot.safety.ownership).
         arm_ctl, base_ctl = (ownership.announce(bus, ROBOT, part, "test") for part in ("arm", "base"))
         wait_until(lambda: bus.call(keys.driver_rpc(ROBOT, "status"), {})["holders"]["arm"] == arm_ctl.id, timeout=5)
         t1 = time.monotonic()

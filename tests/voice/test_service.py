@@ -32,7 +32,7 @@ SOURCE = "web-page1"
 
 
 class TaskDesk:
-    """The web service's tasks verbs (services/web/tasks_bus.py): list, launch on a robot (one
+    """The web service's tasks verbs (services/web/asibot/web/tasks_bus.py): list, launch on a robot (one
     program at a time, events on the robot's key), stop; every call recorded."""
 
     def __init__(self, bus: Bus, tasks: dict[str, list[str]]) -> None:

@@ -738,7 +738,7 @@ def test_a_gamepad_moves_the_tip_while_its_deadman_is_held(pointer, kitchen):
                message="releasing the gamepad's dead-man did not stop the arm")
 
 
-# The kitchen's arm mount in the world (services/sim/worlds/kitchen.xml: station + arm_mount site).
+# The kitchen's arm mount in the world (services/sim/asibot/sim/worlds/kitchen.xml: station + arm_mount site).
 MOUNT = (-0.2, 0.0, 0.94)
 #: How high above the can's centre the tool's point grasps it from above (the wizard's at_can).
 GRASP_ABOVE = 0.07

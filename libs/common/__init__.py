@@ -1,1 +1,0 @@
-"""asibot: an assistive robot stack on Zenoh. This package is libs/common."""

@@ -1,0 +1,283 @@
+"""The user's Python API (README, "Programming the arm"): a thin, blocking wrapper over the kinematics and nav RPC.
+
+Points are the seed's [x, y, z, rot(y'), rot(z'')] in m and deg, joints in deg. Every call
+has a timeout; a refusal raises asibot.errors.RpcError (code + the server's sentence).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from typing import Sequence
+
+from asibot.safety import estop
+from asibot import keys
+from asibot.bus import Bus
+from asibot.errors import RpcError, Timeout
+from asibot.safety.estop import who
+from asibot.safety.identity import Identity
+
+#: Per-call timeout for quick verbs, s.
+CALL_TIMEOUT = 5.0
+#: How often NavClient.wait asks how the goal goes, s.
+WAIT_POLL = 0.2
+
+
+class _Client:
+    """What the user's clients share: one robot, one bus connection, calls with a timeout,
+    and the robot's emergency stop."""
+
+    #: The verb whose answer says the service is there, and how to start it, for `open`.
+    _probe = ""
+    _service = ""
+
+    def __init__(self, robot: str | None = None, timeout: float = CALL_TIMEOUT) -> None:
+        self.robot: str | None = None
+        self.timeout = timeout
+        self._bus: Bus | None = None
+        self._me = Identity("program")   # signs its estops and releases (asibot.safety.estop)
+        if robot:
+            self.open(robot)
+
+    def _key(self, verb: str) -> str:
+        raise NotImplementedError
+
+    def open(self, robot: str) -> bool:
+        """Connect to the service of `robot`; raises Unavailable if it does not answer."""
+        if self._bus is None:
+            self._bus = Bus("client", wait=self.timeout)
+        self.robot = robot.strip("/")
+        if not self._bus.wait_for(self._key(self._probe), timeout=self.timeout):
+            raise RpcError("unavailable", f"No {self._service} service answers for robot {self.robot!r}; "
+                                          f"start it with `python -m asibot.{self._service} --robot {self.robot}`.")
+        return True
+
+    def close(self) -> None:
+        if self._bus is not None:
+            self._bus.close()
+            self._bus = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _call(self, verb: str, _timeout: float | None = None, **request: object) -> dict:
+        bus = self._connected()
+        body = {k: list(v) if isinstance(v, (tuple, list)) else v for k, v in request.items() if v is not None}
+        return bus.call(self._key(verb), body, timeout=_timeout or self.timeout)
+
+    def _connected(self) -> Bus:
+        if self._bus is None or self.robot is None:
+            raise RpcError("bad_request", "Call open(robot) first.")
+        return self._bus
+
+    # --- safety: every client can stop its robot -------------------------------------------
+    def estop(self, reason: str = "emergency stop from a program") -> None:
+        """Engage the robot's emergency stop: it stops at once and refuses every motion until
+        release(). The drivers and the controller keep it latched, so it holds after this program
+        ends (asibot.safety.estop); their events say who engaged it (this user, program and pid)."""
+        estop.latch(self._connected(), self.robot, self._me, True, reason, who(login_of=self._bus.name))
+
+    def release(self, reason: str = "released from a program") -> None:
+        """Release the emergency stop. Nothing moves by itself afterwards: the robot moves again
+        only on a motion request made after the release. The drivers' events say who released it."""
+        estop.latch(self._connected(), self.robot, self._me, False, reason, who(login_of=self._bus.name))
+
+    def reset_fault(self) -> dict:
+        """Ask the robot's driver to clear a fault (re-initialise the drive that failed);
+        raises RpcError with the driver's sentence when the fault is still there."""
+        return self._connected().call(keys.driver_rpc(self.robot, "reset_fault"), timeout=self.timeout)
+
+
+class CartesianClient(_Client):
+    """`robot = CartesianClient(); robot.open("asibot-sim"); robot.movl(home); robot.wait()`."""
+
+    _probe, _service = "stat", "kinematics"
+
+    def _key(self, verb: str) -> str:
+        return keys.cart_rpc(self.robot, verb)
+
+    # --- the seed's verbs ---------------------------------------------------------------
+    def stat(self, res: list | None = None) -> list[float]:
+        """Current point; also fills `res` in place like the seed's stat(res)."""
+        point = self._call("stat")["point"]
+        if res is not None:
+            res[:] = point
+        return point
+
+    def state(self) -> dict:
+        """The whole stat reply: state, point, joints, estop, fault."""
+        return self._call("stat")
+
+    def inv(self, point: Sequence[float], res: list | None = None) -> list[float]:
+        joints = self._call("inv", point=point)["joints"]
+        if res is not None:
+            res[:] = joints
+        return joints
+
+    def fwd(self, joints: Sequence[float]) -> list[float]:
+        return self._call("fwd", joints=joints)["point"]
+
+    def movj(self, point: Sequence[float] | None = None, *, joints: Sequence[float] | None = None,
+             duration: float | None = None, speed: float | None = None) -> float:
+        """Joint-space move to a point (or to `joints`, deg); returns the planned duration."""
+        return self._call("movj", point=point, joints=joints, duration=duration, speed=speed)["duration"]
+
+    def movl(self, point: Sequence[float], *, duration: float | None = None, speed: float | None = None) -> float:
+        """Straight line to a point, null start/end velocity; speed in m/s."""
+        return self._call("movl", point=point, duration=duration, speed=speed)["duration"]
+
+    def relj(self, joints: Sequence[float], *, duration: float | None = None) -> float:
+        return self._call("relj", joints=joints, duration=duration)["duration"]
+
+    def movv(self, velocity: Sequence[float]) -> None:
+        """Stream a velocity (m/s, deg/s); send again within 200 ms to keep moving."""
+        self._call("movv", velocity=velocity)
+
+    def movjv(self, velocity: Sequence[float]) -> None:
+        """Stream joint velocities (deg/s, one per joint); send again within 200 ms to keep moving."""
+        self._call("movjv", velocity=velocity)
+
+    def home(self) -> float:
+        return self._call("home")["duration"]
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Block until the motion ends. On timeout the motion is stopped and Timeout is raised."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            left = 10.0 if deadline is None else max(0.01, min(10.0, deadline - time.monotonic()))
+            if self._call("wait", _timeout=left + 3.0, timeout=left)["done"]:
+                return True
+            if deadline is not None and time.monotonic() >= deadline:
+                self.stop()
+                raise Timeout(f"The motion did not finish within {timeout:g} s; it was stopped.")
+
+    def stop(self) -> None:
+        """Stop the arm, whoever moved it: its controller ends its motion and tells the driver
+        to hold where the arm is."""
+        self._call("stop")
+
+    def tool(self, tool: Sequence[float] | None = None) -> None:
+        """Attach a tool frame: [x, y, z, rx, ry, rz] in m and deg, like points: the tool point's
+        offset from the flange (other arms: from their approach frame) and its rotation as a
+        rotation vector (axis times angle in deg). From then on points (stat, inv, movj, movl,
+        ...) are the tool point's. None (or all zeros) removes it."""
+        self._call("tool", tool=tool)
+
+    def act(self, action: str) -> dict:
+        """Gripper "open" or "close"; returns once the fingers have moved and stopped (at once if
+        they are there already): {"opening": m, "holding": bool}. RpcError "timeout" when they
+        do not start within 1.5 s of the command or are still moving after 4 s."""
+        reply = self._call("act", action=action)
+        return {"opening": reply["opening"], "holding": reply["holding"]}
+
+    def grip(self, close: bool = True) -> bool:
+        """Close (or open) the gripper; True when it holds something afterwards."""
+        return self.act("close" if close else "open")["holding"]
+
+
+class NavClient(_Client):
+    """The nav service's verbs for a mobile robot:
+    `base = NavClient("pioneer-sim"); base.goto("fridge"); base.wait()`.
+
+    `goto`, `drive`, `turn` and `primitive` start the motion and return at once (a new one
+    replaces the running one); `wait` blocks until it ends and raises RpcError with the
+    server's sentence when it did not end where asked ("could not reach fridge: ...")."""
+
+    _probe, _service = "status", "nav"
+
+    def _key(self, verb: str) -> str:
+        return keys.nav_rpc(self.robot, verb)
+
+    def goto(self, target: str | Sequence[float]) -> int:
+        """Go to a named place ("fridge") or a pose (x, y, theta in m, m, rad, map frame);
+        returns the goal's id at once."""
+        if isinstance(target, str):
+            return self._call("goto", place=target)["goal_id"]
+        return self._call("goto", pose=list(target))["goal_id"]
+
+    def wait(self, goal_id: int | None = None, timeout: float | None = None) -> dict:
+        """Block until goal `goal_id` (default: whatever drives the base now) ends; its result
+        {"state", "text", ...}. Raises RpcError when it did not succeed: "unreachable" when it
+        was aborted, "busy" when it was canceled or replaced; Timeout after `timeout` s (the
+        motion goes on: call cancel() to stop it)."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            r = self._call("result", goal_id=goal_id) if goal_id is not None else self._call("status")
+            if r["state"] not in ("active", "idle") or (r["state"] == "idle" and goal_id is None):
+                break
+            if deadline is not None and time.monotonic() >= deadline:
+                raise Timeout(f"The robot was still on its way after {timeout:g} s ({r['text']}); it goes on.")
+            time.sleep(WAIT_POLL)
+        if r["state"] in ("succeeded", "idle"):
+            return r
+        code = "unreachable" if r["state"] == "aborted" else "estop" if "emergency stop" in r["text"] else "busy"
+        raise RpcError(code, r["text"][:1].upper() + r["text"][1:])
+
+    def cancel(self, goal_id: int | None = None) -> dict:
+        """Cancel the running goal (or `goal_id`, if it is the one running)."""
+        return self._call("cancel", goal_id=goal_id)
+
+    def stop(self) -> None:
+        """Stop whatever drives the base: a goal or a primitive."""
+        self._call("primitive", name="stop")
+
+    def status(self) -> dict:
+        """The latest goal's or drive's state and sentence, and the robot's pose."""
+        return self._call("status")
+
+    def pose(self) -> list[float]:
+        """Where the robot believes it is: x, y, theta (m, m, rad, map frame)."""
+        return self._call("status")["pose"]
+
+    def places(self) -> dict[str, list[float]]:
+        """The named places: name -> [x, y, theta]."""
+        return {p["name"]: p["pose"] for p in self._call("places")["places"]}
+
+    def save_place(self, name: str, pose: Sequence[float] | None = None, replace: bool = False) -> list[float]:
+        """Save a place where the robot stands (or at `pose`); `replace` moves an existing one."""
+        return self._call("save_place", name=name, pose=pose, replace=replace or None)["pose"]
+
+    def rename_place(self, name: str, new_name: str) -> None:
+        self._call("rename_place", name=name, new_name=new_name)
+
+    def remove_place(self, name: str) -> None:
+        self._call("remove_place", name=name)
+
+    def drive(self, distance: float) -> str:
+        """Drive straight `distance` m (negative: backwards), stopping before obstacles."""
+        return self._call("drive", distance=distance)["text"]
+
+    def turn(self, angle: float) -> str:
+        """Turn in place by `angle` degrees (positive: left, counter-clockwise)."""
+        return self._call("turn", angle=angle)["text"]
+
+    def primitive(self, name: str, continuous: bool = False) -> str:
+        """One of the thesis's driving primitives ("forward", "turn left 90", "curve forward
+        left", ...); `continuous` goes on until stop()."""
+        return self._call("primitive", name=name, continuous=continuous or None)["text"]
+
+    def set_pose(self, pose: Sequence[float]) -> None:
+        """Tell localisation where the robot is (x, y, theta in m, m, rad, map frame)."""
+        self._call("set_pose", pose=list(pose))
+
+    def map_start(self) -> str:
+        """Start building a new map where the robot stands; drive it (drive, turn, primitive)
+        through every room while it maps. Goals are refused until the map is saved and used."""
+        return self._call("map_start")["text"]
+
+    def map_stop(self) -> str:
+        """Stop mapping; the map is kept to be saved, and the map in use stays."""
+        return self._call("map_stop")["text"]
+
+    def map_save(self, name: str, use: bool = False) -> dict:
+        """Save the map built as <name>.yaml + <name>.pgm (ROS map_server) in the user's maps
+        folder; `use` makes it the map in use at once. {"yaml", "pgm", "text"}."""
+        return self._call("map_save", name=name, use=use or None)
+
+
+def default_robot() -> str:
+    """The robot a user program drives: ASIBOT_ROBOT or asibot-sim."""
+    return os.environ.get("ASIBOT_ROBOT", "asibot-sim")

@@ -1,0 +1,1 @@
+"""The robots' URDF models: data, read through importlib.resources (asibot.robots)."""

@@ -1,0 +1,397 @@
+"""The ASIBOT arm driver: the driver contract on top of the CANopen master. No Zenoh here.
+
+One control thread owns the CAN master: at the control rate it checks the drives (EMCY,
+heartbeats, statuswords, bus-off), advances the set-points, sends them with SYNC and reports
+the arm state. Commands, estop and liveliness arrive from other threads and only touch the
+set-point generator under a lock. Any fault quick-stops every drive and latches until
+reset_fault; estop, the command watchdog and a vanished controller hold position instead.
+Whose commands are obeyed is decided by the service (asibot.safety.ownership); after a fault reset,
+an estop release or a change of controller, a stream of commands from before moves nothing
+until it pauses (asibot.safety.arming).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Callable
+
+from asibot.arm_driver import emcy, objects
+from asibot.arm_driver.cia402 import State
+from asibot.arm_driver.config import ArmConfig
+from asibot.arm_driver.master import CanopenMaster, DriveError, Feedback
+from asibot.arm_driver.motion import JointReference
+from asibot.safety.arming import Arming
+from asibot.messages import ArmState
+from asibot.timing import Ticker
+
+log = logging.getLogger(__name__)
+
+StateSink = Callable[[ArmState], None]
+EventSink = Callable[[str, str, str], None]      # level, code, text
+MODE_NAMES = {objects.MODE_CSP: "cyclic synchronous position", objects.MODE_PROFILE_POSITION: "profile position"}
+
+
+class FaultError(Exception):
+    """reset_fault could not clear the fault; the message says why and what to do."""
+
+
+class ArmDriver:
+    """Drives the arm described by `config` through `master`."""
+
+    def __init__(self, master: CanopenMaster, config: ArmConfig, on_state: StateSink, on_event: EventSink) -> None:
+        self.master = master
+        self.config = config
+        self.on_state = on_state
+        self.on_event = on_event
+        self.joints = config.joints
+        self.ref = JointReference([j.lower for j in config.joints], [j.upper for j in config.joints],
+                                  [j.max_velocity for j in config.joints], config.period, names=config.names)
+        self._lock = threading.RLock()
+        self._stop = threading.Event()
+        self._up: set[int] = set()
+        self.fault = "The drives are starting."
+        self._faulted = True
+        self._fault_code: tuple[str, int] = ("starting", 0)
+        self._reported: set[tuple[str, int]] = set()
+        self.estop = False
+        self._estop_reason = ""
+        self.arming = Arming()          # a driver starts armed (asibot.safety.arming says why)
+        self._reset_request: tuple[threading.Event, list] | None = None
+        self._feedback: dict[int, Feedback] = {}
+        self.counters = {"cycles": 0, "rejected_commands": 0, "ignored_commands": 0, "not_ready": 0, "faults": 0,
+                         "tx_errors": 0}
+        self._ticker: Ticker | None = None
+        self._thread = threading.Thread(target=self._run, name="arm-control", daemon=True)
+
+    # ------------------------------------------------------------ life cycle
+    def start(self) -> None:
+        self._thread.start()
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive() and threading.current_thread() is not self._thread:
+            self._thread.join(2.0)
+        for node in list(self._up):
+            try:
+                self.master.quick_stop(node)
+            except DriveError:
+                pass
+        self.master.close()
+
+    # ------------------------------------------------------------ inputs (any thread)
+    def command(self, mode: str, values: list[float], velocities: list[float] | None = None,
+                controller: str = "") -> bool:
+        """Apply an ArmCommand of `controller` (the holder: the service checked). Raises
+        ValueError (and changes nothing: the arm keeps its previous motion) on bad input;
+        motion.CommandRefused for a value beyond a joint's limits or max speed, or not finite:
+        such a command is refused whole, never clipped; arming.NotReady for a command that
+        continues a stream from before the last recovery.
+
+        Returns False when the command was ignored because of estop or a fault.
+        """
+        n = len(self.joints)
+        if mode not in ("position", "velocity"):
+            self.counters["rejected_commands"] += 1
+            raise ValueError(f"mode must be 'position' or 'velocity', got {mode!r}")
+        if len(values) != n:
+            self.counters["rejected_commands"] += 1
+            raise ValueError(f"the ASIBOT has {n} joints ({', '.join(self.config.names)}); "
+                             f"the command has {len(values)} values")
+        if velocities and len(velocities) != n:
+            self.counters["rejected_commands"] += 1
+            raise ValueError(f"velocities must be empty or have {n} values, not {len(velocities)}")
+        values, velocities = list(values), list(velocities or [])
+        with self._lock:
+            fb = self._feedback
+            measured = ([j.units.to_rad(fb[j.node].position) for j in self.joints]
+                        if all(j.node in fb for j in self.joints) else None)
+            try:
+                self.ref.check(mode, values, velocities, measured)
+            except ValueError:
+                self.counters["rejected_commands"] += 1
+                raise
+            now = time.monotonic()
+            may_move = self.arming.admit(controller, now)   # noted even when ignored below
+            if self.estop or self._faulted:
+                self.counters["ignored_commands"] += 1
+                return False
+            if not may_move:
+                self.counters["not_ready"] += 1
+                raise self.arming.refusal("the arm")
+            if mode == "position":
+                self.ref.position(values, velocities, now, measured)
+            else:
+                self.ref.velocity(values, now)
+            return True
+
+    def heard(self, controller: str) -> None:
+        """A command of a controller that does not hold the arm (refused by the service): noted,
+        so that its stream does not move the arm the moment it takes over."""
+        with self._lock:
+            self.arming.heard(controller, time.monotonic())
+
+    def set_estop(self, engaged: bool, reason: str = "", by: str = "") -> None:
+        with self._lock:
+            if engaged == self.estop:
+                return
+            self.estop = engaged
+            self._estop_reason = reason
+            who = f" by {by}" if by else ""
+            if engaged:
+                self.ref.hold()
+            else:
+                self.arming.disarm(f"the emergency stop was released{who}")
+                ready = self.arming.ready_text("The arm")
+        if engaged:
+            self.on_event("warning", "estop", f"Emergency stop engaged{who}" + (f" ({reason})" if reason else "")
+                          + ": the arm holds its position and ignores motion commands until it is released.")
+        else:
+            self.on_event("info", "estop_released", f"Emergency stop released{who}"
+                          + (f" ({reason})" if reason else "") + ".")
+            self.on_event("info", "ready", ready)
+
+    def set_controller(self, holder: str | None) -> None:
+        """The controller that holds the arm changed (asibot.safety.ownership): stop if the arm was
+        moving, and re-arm for the new holder, if any."""
+        with self._lock:
+            moving = self.ref.moving
+            if moving:
+                self.ref.hold()
+            if holder is not None:
+                self.arming.disarm(f"controller {holder!r} took hold of it")
+                ready = self.arming.ready_text("The arm")
+            else:
+                self.arming.disarm("its controller disappeared")
+        if moving:
+            self.on_event("warning", "controller_lost",
+                          "The controller of the arm changed or disappeared while the arm was moving: the arm stopped.")
+        if holder is not None:
+            self.on_event("info", "ready", ready)
+
+    def reset_fault(self, timeout: float = 10.0) -> dict:
+        """Clear a latched fault: re-initialise lost drives, reset faulted ones, enable all.
+
+        Runs on the control thread; raises FaultError with a sentence when it cannot.
+        """
+        done, result = threading.Event(), []
+        with self._lock:
+            if self._reset_request is not None:
+                raise FaultError("A fault reset is already running; wait for it to finish.")
+            self._reset_request = (done, result)
+        if not done.wait(timeout):
+            raise FaultError(f"The fault reset did not finish within {timeout:g} s; check the CAN bus.")
+        outcome = result[0]
+        if isinstance(outcome, Exception):
+            raise FaultError(str(outcome))
+        return outcome
+
+    def status(self) -> dict:
+        with self._lock:
+            fb = self._feedback
+            drives = [{
+                "joint": j.name, "node": j.node,
+                "state": fb[j.node].state.value if j.node in fb else "unknown",
+                "nmt": fb[j.node].nmt_state if j.node in fb else None,
+                "mode": MODE_NAMES.get(self.master.modes.get(j.node), "not configured"),
+            } for j in self.joints]
+            return {
+                "names": self.config.names,
+                "lower": [j.lower for j in self.joints], "upper": [j.upper for j in self.joints],
+                "max_velocity": [j.max_velocity for j in self.joints],
+                "mode": self._mode(), "fault": self.fault, "estop": self.estop, "drives": drives,
+                "control_rate_hz": self.config.control_rate_hz,
+            }
+
+    def health(self) -> dict:
+        with self._lock:
+            stats = self._ticker.stats() if self._ticker else {}
+            return {"mode": self._mode(), "fault": self.fault, **self.counters,
+                    "frames_sent": self.master.frames_sent,
+                    "period_jitter_p99_ms": round(stats.get("p99", 0.0) * 1000, 3)}
+
+    def _mode(self) -> str:
+        return "fault" if self._faulted else self.ref.mode
+
+    # ------------------------------------------------------------ the control thread
+    def _run(self) -> None:
+        try:
+            self._bring_up(self.config.nodes)
+        except DriveError as exc:
+            self._enter_fault("startup", 0, str(exc))
+        self._ticker = Ticker(self.config.control_rate_hz, self._stop)
+        while self._ticker.wait():
+            try:
+                self._tick()
+            except Exception:       # a bug must not silently stop the SYNC loop
+                log.exception("control cycle failed")
+                self._enter_fault("internal", 0, "The arm driver hit an internal error and stopped the arm; "
+                                  "see its log, then call reset_fault.")
+
+    def _bring_up(self, nodes: list[int]) -> None:
+        # No NMT reset first: it would restart a drive's position counter, and q1/q5 have no
+        # absolute encoder to recover it from (docs/canopen.md, "Absolute encoders"). Configuring
+        # is idempotent.
+        for node in nodes:
+            self.master.configure(node)
+            self.master.start(node)
+        for node in self.config.nodes:
+            self.master.enable(node)
+        fb = self.master.snapshot()
+        with self._lock:
+            self._feedback = fb
+            self._up = set(self.config.nodes)
+            self.ref.reset([j.units.to_rad(fb[j.node].position) for j in self.joints])
+            self.fault, self._faulted, self._fault_code = "", False, ("", 0)
+            self._reported.clear()
+        log.info("drives enabled in %s", ", ".join(sorted({MODE_NAMES[m] for m in self.master.modes.values()})))
+
+    def _tick(self) -> None:
+        now = time.monotonic()
+        fb = self.master.snapshot()
+        with self._lock:
+            self._feedback = fb
+        self._check(fb, now)
+        self._watchdog(now)
+        with self._lock:
+            if self._faulted:
+                targets = {n: fb[n].position for n in self.master.modes}
+            else:
+                rad = self.ref.step(now)
+                targets = {j.node: j.units.to_counts(r) for j, r in zip(self.joints, rad)}
+        try:
+            self.master.cycle(targets)
+        except DriveError as exc:
+            self.counters["tx_errors"] += 1
+            self._enter_fault("bus_off", 0, str(exc))
+        self.counters["cycles"] += 1
+        self._publish(fb)
+        self._serve_reset()
+
+    def _check(self, fb: dict[int, Feedback], now: float) -> None:
+        # A drive is silent when, on the bus's own clock, others spoke well after its heartbeat
+        # was due. Frame time stamps, not the time we read them: a busy machine can stall the
+        # CAN reader, and frames read in a burst afterwards must not make the ones still queued
+        # look missing. A bus on which nobody speaks at all is caught here, after two timeouts.
+        timeout = self.config.heartbeat_timeout
+        heard = max(max(f.heartbeat_time, f.position_time) for f in fb.values())
+        if self._up and now - heard > 2 * timeout:
+            self._enter_fault("bus_silent", 0, f"No drive has said anything on CAN for {now - heard:.2f} s: "
+                              "the arm was stopped; check the drives' power and the CAN cable, then call "
+                              "reset_fault.")
+        for j in self.joints:
+            f = fb[j.node]
+            who = f"Drive {j.node} (joint {j.name})"
+            for e in f.emcys:
+                if not e.is_reset:
+                    self._enter_fault(f"emcy_{e.code:04x}", j.node, emcy.sentence(e, j.node, j.name))
+            if j.node not in self._up:
+                continue
+            if f.booted:
+                self._enter_fault("drive_restarted", j.node, f"{who} restarted (boot-up message): the arm was "
+                                  "stopped; check its power supply "
+                                  "and that the position it reports is right, then call reset_fault.")
+            elif self._silent(f, fb, now):
+                self._enter_fault("heartbeat_lost", j.node, f"{who} went silent (no heartbeat for "
+                                  f"{now - f.heartbeat_time:.2f} s): the arm was stopped; check its power and "
+                                  "CAN cable, then call reset_fault.")
+            elif f.state in (State.FAULT, State.FAULT_REACTION_ACTIVE) and not any(
+                    c.startswith("emcy_") and n == j.node for c, n in self._reported):
+                self._enter_fault("drive_fault", j.node, f"{who} is in fault (statusword 0x{f.statusword:04X}, "
+                                  f"motion error register 0x{f.mer:04X}): the arm was stopped; call reset_fault.")
+            elif not self._faulted and f.state is not State.OPERATION_ENABLED:
+                self._enter_fault("drive_disabled", j.node, f"{who} left operation enabled (now "
+                                  f"'{f.state.value}'): the arm was stopped; check its enable input, then call "
+                                  "reset_fault.")
+        if self.master.bus_off:
+            self._enter_fault("bus_off", 0, "The CAN controller went bus-off (too many transmission errors): "
+                              "the arm was stopped; check the cable, termination and bit rate, then call reset_fault.")
+
+    def _silent(self, f: Feedback, fb: dict[int, Feedback], now: float) -> bool:
+        timeout = self.config.heartbeat_timeout
+        if now - f.heartbeat_time <= timeout:
+            return False
+        if len(fb) == 1 or f.heartbeat_stamp is None:
+            return True
+        return max(g.stamp for g in fb.values()) - f.heartbeat_stamp > timeout
+
+    def _enter_fault(self, code: str, node: int, sentence: str) -> None:
+        if (code, node) in self._reported:
+            return
+        self._reported.add((code, node))
+        with self._lock:
+            first = not self._faulted
+            self._faulted = True
+            # The first fault explains the stop; an EMCY refines a bare statusword fault of its drive.
+            replace = first or self._fault_code[0] == "starting" or (
+                code.startswith("emcy_") and self._fault_code == ("drive_fault", node))
+            if replace:
+                self.fault, self._fault_code = sentence, (code, node)
+            self.ref.hold()
+        self.counters["faults"] += 1
+        if first:
+            for n in sorted(self._up):
+                try:
+                    self.master.quick_stop(n)
+                except DriveError:
+                    self.counters["tx_errors"] += 1
+        log.error("%s", sentence)
+        self.on_event("error", code, sentence)
+
+    def _watchdog(self, now: float) -> None:
+        with self._lock:
+            dog = self.ref.watchdog
+            fired = dog.fires(now, self.ref.streaming)
+            if fired:
+                self.ref.hold()
+        if fired:
+            self.on_event("warning", "watchdog", dog.says("velocity command", "the arm stopped and holds its position"))
+
+    def _publish(self, fb: dict[int, Feedback]) -> None:
+        with self._lock:
+            mode, fault = self._mode(), self.fault
+        state = ArmState(names=self.config.names,
+                         positions=[j.units.to_rad(fb[j.node].position) for j in self.joints],
+                         velocities=[j.units.to_rad(fb[j.node].velocity) for j in self.joints],
+                         mode=mode, fault=fault)
+        try:
+            self.on_state(state)
+        except Exception:
+            log.exception("publishing the arm state failed")
+
+    def _serve_reset(self) -> None:
+        with self._lock:
+            request, self._reset_request = self._reset_request, None
+        if request is None:
+            return
+        done, result = request
+        try:
+            result.append(self._reset())
+        except DriveError as exc:
+            with self._lock:
+                self.fault = str(exc)
+                self._faulted = True
+            result.append(exc)
+        finally:
+            done.set()
+
+    def _reset(self) -> dict:
+        self.master.bus_off = False
+        self.master.tx_error = ""
+        now = time.monotonic()
+        fb = self.master.snapshot()
+        lost = [j.node for j in self.joints
+                if j.node not in self._up or fb[j.node].booted or self._silent(fb[j.node], fb, now)]
+        log.info("resetting the fault; re-initialising drives %s", lost or "none")
+        self._bring_up(lost)
+        self.master.snapshot()          # the error-reset EMCYs of this reset are not news
+        with self._lock:
+            self.arming.disarm("the fault was reset")
+            ready = self.arming.ready_text("The arm")
+        self.on_event("info", "fault_reset", "The fault was reset: the drives are enabled and hold their position.")
+        self.on_event("info", "ready", ready)
+        return {"reinitialised": [self._name(n) for n in lost]}
+
+    def _name(self, node: int) -> str:
+        return next(j.name for j in self.joints if j.node == node)

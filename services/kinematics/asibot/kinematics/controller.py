@@ -1,0 +1,371 @@
+"""The Cartesian control state machine, free of any bus: the server feeds it measurements and
+requests, and asks it at every tick for the next joint reference.
+
+States follow the seed's ccnc, ccjc, cclc, ccvc (docs/asibot-conventions.md, "Control states")
+plus `pointer` ("Pointer mode").
+Rules: motion is refused while the estop is engaged ("estop"), without a driver
+("unavailable"), with a faulted driver ("fault"), and while another planned motion runs
+("busy"; stop or wait first). Streaming modes (movv, pointer) stop after 200 ms without a new
+command, like the driver's own watchdog (docs/foundation-api.md, "Contracts").
+
+Planning never holds the controller: a movj or movl is planned (`plan_movj`, `plan_movl`)
+from a snapshot of the measured joints taken under the lock, without the lock, and only
+`start` takes it again to begin the planned motion. Stop, state and the control loop are
+therefore never blocked by a request, however long its path check takes. A plan starts only
+if nothing happened to the controller since its snapshot; otherwise it is refused and
+nothing moves:
+- the estop was engaged (even if released since): "estop";
+- the arm reported a new fault: "fault"; the driver vanished: "unavailable";
+- a `stop` came: "busy", a stop cancels the motions being planned as well as the running one;
+- another motion started meanwhile (a movj, movl, movv or pointer): "busy".
+Asking for a movj or movl ends a running stream (movv, pointer) first: the arm holds still
+while the new motion is planned, so the plan starts where the arm is.
+
+Re-arming (asibot.safety.arming): after the controller's own start, an estop release, a fault
+cleared or the driver back, a stream of requests (movv, movjv, pointer) that was still
+arriving moves nothing ("busy", with a sentence) until it pauses for a watchdog period or is
+restarted; a movj or movl is a new request and moves. A `stop` does not re-arm: a jog
+button pressed again at once after its stop moves at once.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+from typing import Any, Protocol, Sequence
+
+import numpy as np
+
+from asibot.safety.arming import Arming
+from asibot.errors import RpcError
+from asibot.messages import COMMAND_WATCHDOG_S
+from asibot.safety.watchdog import Watchdog
+
+from . import trajectory
+
+NOT_CONTROLLING = "not_controlling"
+MOVJ = "movj"
+MOVL = "movl"
+MOVV = "movv"
+MOVJV = "movjv"
+POINTER = "pointer"
+STREAMS = (MOVV, MOVJV, POINTER)
+STATES = (NOT_CONTROLLING, MOVJ, MOVL) + STREAMS
+
+
+class Model(Protocol):
+    pose_size: int
+    def fwd(self, q: np.ndarray) -> np.ndarray: ...
+    def inv(self, pose: np.ndarray, q_guess: np.ndarray) -> np.ndarray: ...
+    def inv_path(self, poses: np.ndarray, q0: np.ndarray) -> tuple[np.ndarray, RpcError | None]: ...
+
+
+class Spec(Protocol):
+    joint_names: list[str]
+    lower: list[float]
+    upper: list[float]
+    max_velocity: list[float]
+
+
+@dataclass
+class Planned:
+    """A motion planned outside the lock, to be started with Controller.start."""
+    state: str                  # MOVJ or MOVL
+    plan: trajectory.JointPlan
+    ticket: int                 # the controller's epoch at the snapshot
+
+
+@dataclass
+class Reference:
+    """What the server sends as ArmCommand(mode="position")."""
+    positions: list[float]
+    velocities: list[float]
+
+
+class Controller:
+    """Holds the measured state, the active motion and the outcome of the last motion."""
+
+    def __init__(self, model: Model, spec: Spec, started: float | None = None) -> None:
+        """`started`: when the controller starts, on the clock of the requests' `now` (the
+        server's); a stream arriving then may have been running against a controller before
+        this one. None: armed from the start (tests that step time by hand)."""
+        self.model, self.spec = model, spec
+        self.lower = np.asarray(spec.lower, float)
+        self.upper = np.asarray(spec.upper, float)
+        self.vmax = np.asarray(spec.max_velocity, float)
+        self.n = len(spec.joint_names)
+        self._lock = threading.RLock()
+        self._done = threading.Condition(self._lock)
+        self.state = NOT_CONTROLLING
+        self.q: np.ndarray | None = None
+        self.driver_alive = False
+        self.fault = ""
+        self.estop = False
+        self.estop_reason = ""
+        self.outcome: RpcError | None = None   # why the last motion ended early, None if it completed
+        self._plan: trajectory.JointPlan | None = None
+        self._t0 = 0.0
+        self._hold: np.ndarray | None = None
+        self._stream_pose: np.ndarray | None = None
+        self._stream_vel = np.zeros(0)
+        self.watchdog = Watchdog()     # a streamed motion lapses when its requests stop
+        self._last_tick: float | None = None
+        self._send_hold = False
+        # Bumped by everything that must cancel a motion being planned (stop, estop, fault,
+        # driver loss, another motion), with what it was, for the refusal's sentence.
+        self._epoch = 0
+        self._interrupt = RpcError("busy", "The controller changed")
+        self.arming = Arming(started)
+        if started is not None:
+            self.arming.disarm("a start of the controller")
+
+    # --- inputs -------------------------------------------------------------------------
+    def on_arm_state(self, positions: Sequence[float], fault: str) -> None:
+        with self._lock:
+            q = np.asarray(positions, float)
+            if q.shape != (self.n,) or not np.all(np.isfinite(q)):
+                return
+            self.q = q
+            if fault and not self.fault:
+                self._cancel(RpcError("fault", f"The arm reports a fault: {fault} Reset it, then retry."),
+                             "A fault of the arm")
+            elif self.fault and not fault:
+                self.arming.disarm("the fault was cleared")
+            self.fault = fault
+
+    def on_estop(self, engaged: bool, reason: str) -> None:
+        with self._lock:
+            if self.estop and not engaged:
+                self.arming.disarm("the emergency stop was released")
+            self.estop, self.estop_reason = bool(engaged), reason
+            if engaged:
+                self._cancel(RpcError("estop", f"Stopped by the emergency stop{': ' + reason if reason else ''}."),
+                             "The emergency stop")
+
+    def on_driver(self, alive: bool) -> None:
+        with self._lock:
+            if alive and not self.driver_alive:
+                self.arming.disarm("the arm driver appeared")
+            self.driver_alive = alive
+            if not alive:
+                self.q = None
+                self._cancel(RpcError("unavailable", "The arm driver disappeared; the motion was stopped. "
+                                                     "Start the driver (or the sim), then retry."),
+                             "The loss of the arm driver")
+
+    # --- requests -----------------------------------------------------------------------
+    def check_can_move(self) -> np.ndarray:
+        """The measured joints if motion is allowed now; otherwise the refusal."""
+        if self.estop:
+            raise RpcError("estop", "The emergency stop is engaged"
+                           f"{' (' + self.estop_reason + ')' if self.estop_reason else ''}; release it before moving.")
+        if not self.driver_alive or self.q is None:
+            raise RpcError("unavailable", "No arm driver is running for this robot; start the driver or the sim.")
+        if self.fault:
+            raise RpcError("fault", f"The arm reports a fault: {self.fault} Reset it, then retry.")
+        return self.q.copy()
+
+    def _check_idle(self) -> None:
+        if self.state in (MOVJ, MOVL):
+            raise RpcError("busy", f"A {self.state} is still running; call wait() or stop() first.")
+
+    def movj(self, q_target: np.ndarray, now: float, *, duration: float | None = None,
+             speed: float | None = None) -> float:
+        """Plan and start a joint-space move; returns its duration in s."""
+        return self.start(self.plan_movj(q_target, duration=duration, speed=speed), now)
+
+    def movl(self, pose_target: np.ndarray, now: float, *, duration: float | None = None,
+             speed: float | None = None, describe: Any = None) -> float:
+        """Plan and start a straight-line move to an SI pose after checking the whole path."""
+        return self.start(self.plan_movl(pose_target, duration=duration, speed=speed, describe=describe), now)
+
+    def _snapshot(self) -> tuple[np.ndarray, int]:
+        """The measured joints to plan from and the epoch to start against; refuses what
+        cannot move now. Ends a running stream: the arm holds while the motion is planned."""
+        with self._lock:
+            q0 = self.check_can_move()
+            self._check_idle()
+            if self.state in STREAMS:
+                self._abort(None)
+            return q0, self._epoch
+
+    def plan_movj(self, q_target: np.ndarray, *, duration: float | None = None,
+                  speed: float | None = None) -> Planned:
+        """Plan an isochronous joint move from the measured joints (the lock is held only for
+        the snapshot); `start` begins it."""
+        q1 = np.asarray(q_target, float)
+        bad = np.flatnonzero(~((q1 >= self.lower) & (q1 <= self.upper)))
+        if bad.size:
+            j = int(bad[0])
+            raise RpcError("joint_limit", f"Joint {j + 1} target {np.degrees(q1[j]):.1f} deg is outside its limits "
+                                          f"{np.degrees(self.lower[j]):.0f}..{np.degrees(self.upper[j]):.0f} deg.")
+        q0, ticket = self._snapshot()
+        return Planned(MOVJ, trajectory.plan_movj(q0, q1, self.vmax, duration=duration, speed=speed), ticket)
+
+    def plan_movl(self, pose_target: np.ndarray, *, duration: float | None = None,
+                  speed: float | None = None, describe: Any = None) -> Planned:
+        """Plan a straight line from the measured joints to an SI pose, checking the whole
+        path, without holding the lock (only for the snapshot); `start` begins it."""
+        q0, ticket = self._snapshot()
+        p0 = np.asarray(self.model.fwd(q0), float)
+        kw = {"describe": describe} if describe else {}
+        plan = trajectory.plan_movl(self.model, q0, p0, pose_target, self.lower, self.upper, self.vmax,
+                                    duration=duration, speed=speed, **kw)
+        return Planned(MOVL, plan, ticket)
+
+    def start(self, planned: Planned, now: float) -> float:
+        """Begin a planned motion at time `now` (read it after planning); returns its duration.
+        Refused, and nothing moves, if the controller changed since the plan's snapshot
+        (see the module's docstring for what answers what)."""
+        with self._lock:
+            self.check_can_move()
+            self._check_idle()
+            if planned.ticket != self._epoch:
+                why = self._interrupt
+                raise RpcError(why.code, f"{why.message} came while this {planned.state} was being planned, "
+                                         "so it was not started; nothing moved.")
+            self._start(planned.state, planned.plan, now)
+            return planned.plan.duration
+
+    def stream(self, velocity: np.ndarray, now: float, mode: str = MOVV) -> None:
+        """Set or refresh a streamed velocity (SI): of the pose, or of the joints in mode MOVJV;
+        it lapses after COMMAND_WATCHDOG_S seconds. Refused ("busy") when it continues a
+        stream from before a recovery (see the module's docstring)."""
+        with self._lock:
+            may_move = self.arming.admit("stream", now)   # noted even when refused below
+            q0 = self.check_can_move()
+            self._check_idle()
+            if not may_move:
+                ms = f"{COMMAND_WATCHDOG_S * 1000:.0f} ms"
+                raise RpcError("busy", f"This {mode} did not move the arm: the controller was re-armed after "
+                                       f"{self.arming.why}, and this request continues a stream of requests that was "
+                                       f"running before; pause it for {ms} (or restart it) to move the arm again.")
+            v = np.asarray(velocity, float)
+            size = self.n if mode == MOVJV else self.model.pose_size
+            if v.shape != (size,) or not np.all(np.isfinite(v)):
+                raise RpcError("bad_request", f"A velocity needs {size} finite numbers.")
+            if self.state != mode:
+                self._bump(RpcError("busy", f"A {mode}"))
+                self._stream_pose = np.asarray(self.model.fwd(q0), float)
+                self._hold = q0
+                self._last_tick = None
+                self.outcome = None
+            self.state = mode
+            self._stream_vel = v
+            self.watchdog.feed(now)
+
+    def stop(self) -> None:
+        """Stop any motion; the arm holds its last reference. With no motion of its own running,
+        the arm is told to hold where it is measured: `stop` stops the arm whoever moved it."""
+        with self._lock:
+            idle = self.state == NOT_CONTROLLING
+            self._cancel(None, "A stop")
+            if idle and self.q is not None:
+                self._hold = self.q.copy()
+                self._send_hold = True
+
+    def wait(self, timeout: float | None) -> bool:
+        """Block until no planned motion runs; False on timeout (the motion keeps running)."""
+        with self._lock:
+            return self._done.wait_for(lambda: self.state not in (MOVJ, MOVL), timeout)
+
+    # --- the loop -----------------------------------------------------------------------
+    def tick(self, now: float) -> Reference | None:
+        """The joint reference for this instant, or None when nothing should be sent."""
+        with self._lock:
+            if self.state in (MOVJ, MOVL) and self._plan is not None:
+                t = now - self._t0
+                if t >= self._plan.duration:
+                    q = self._plan.q_at(self._plan.duration)
+                    self._finish(q)
+                    return Reference(q.tolist(), [0.0] * self.n)
+                return Reference(self._plan.q_at(t).tolist(), self._plan.qdot_at(t).tolist())
+            if self.state in STREAMS:
+                return self._stream_tick(now)
+            if self._send_hold and self._hold is not None:
+                self._send_hold = False
+                return Reference(self._hold.tolist(), [0.0] * self.n)
+            return None
+
+    def _stream_tick(self, now: float) -> Reference | None:
+        if self.watchdog.silent(now):
+            self._abort(RpcError("timeout", self.watchdog.says("streamed command", "the motion was stopped")))
+            return self.tick(now)
+        dt = 0.0 if self._last_tick is None else now - self._last_tick
+        self._last_tick = now
+        if self.state == MOVJV:
+            return self._joint_stream_tick(dt)
+        target = self._stream_pose + self._stream_vel * dt
+        q = self._solve(target)
+        if q is None:
+            return self._stream_refused()
+        qdot = (q - self._hold) / dt if dt > 0 else np.zeros(self.n)
+        over = float(np.max(np.abs(qdot) / self.vmax))
+        if over > 1.0:  # near a singularity: slow the stream down instead of exceeding joint speeds
+            target = self._stream_pose + self._stream_vel * dt / (over * 1.05)
+            q = self._solve(target)
+            if q is None:
+                return self._stream_refused()
+            qdot = (q - self._hold) / dt
+            if np.any(np.abs(qdot) > self.vmax):
+                return self._stream_refused()
+        self._stream_pose, self._hold = target, q
+        return Reference(q.tolist(), qdot.tolist())
+
+    def _joint_stream_tick(self, dt: float) -> Reference:
+        """Joints at their streamed speeds (capped at each joint's maximum), stopping at the limits."""
+        qdot = np.clip(self._stream_vel, -self.vmax, self.vmax)
+        q = np.clip(self._hold + qdot * dt, self.lower, self.upper)
+        qdot = (q - self._hold) / dt if dt > 0 else np.zeros(self.n)
+        self._hold = q
+        return Reference(q.tolist(), qdot.tolist())
+
+    def _solve(self, pose: np.ndarray) -> np.ndarray | None:
+        """IK near the held joints, or None when out of reach or past a limit."""
+        try:
+            q = np.asarray(self.model.inv(pose, self._hold), float)
+        except RpcError:
+            return None
+        if np.any(q < self.lower) or np.any(q > self.upper):
+            return None
+        return q
+
+    def _stream_refused(self) -> Reference:
+        """Hold still at the edge of the workspace instead of jumping; streaming goes on."""
+        return Reference(self._hold.tolist(), [0.0] * self.n)
+
+    # --- internals ----------------------------------------------------------------------
+    def _bump(self, what: RpcError) -> None:
+        """Something happened that a motion being planned must not outlive (see start)."""
+        self._epoch += 1
+        self._interrupt = what
+
+    def _cancel(self, why: RpcError | None, what: str) -> None:
+        """Abort the running motion (if any) and the motions being planned."""
+        self._bump(RpcError(why.code if why is not None else "busy", what))
+        self._abort(why)
+
+    def _start(self, state: str, plan: trajectory.JointPlan, now: float) -> None:
+        self._bump(RpcError("busy", f"A {state}"))
+        self.outcome = None
+        self._plan, self._t0, self.state = plan, now, state
+        self._hold = plan.q_at(plan.duration)
+
+    def _finish(self, q: np.ndarray) -> None:
+        self._plan, self._hold, self.state = None, q, NOT_CONTROLLING
+        self._done.notify_all()
+
+    def _abort(self, why: RpcError | None) -> None:
+        if self.state == NOT_CONTROLLING:
+            return
+        if self._plan is not None and self.q is not None:
+            self._hold = self.q.copy()
+        self.outcome = why
+        self._send_hold = True
+        self._plan, self.state = None, NOT_CONTROLLING
+        self._done.notify_all()
+
+    def hold_reference(self) -> Reference | None:
+        """After a stop: where the arm should stay (measured position at the stop)."""
+        with self._lock:
+            return None if self._hold is None else Reference(self._hold.tolist(), [0.0] * self.n)

@@ -1,0 +1,402 @@
+"""The nav service on the bus: one instance per robot (`--robot pioneer-sim`).
+
+In: odometry (`keys.base_odom`), the 360-degree scan of the perception service (`keys.scan`),
+the estop (`keys.estop`, followed and kept served as every process that obeys it does).
+Out: velocity commands on `keys.base_cmd_vel` as the robot's base controller (it announces
+itself, `asibot.safety.ownership`, and every Twist carries its identity); `nav/pose` (every cycle
+the filter updated, and at `pose_hz`), `nav/map` (latched), `nav/path` (when it changes),
+`nav/status` (at `status_hz` and on every change), user Events; the RPC verbs of
+`keys.RPC_VERBS_NAV` on `keys.nav_rpc`. While mapping (`map_start`), `nav/map` carries the
+map being built every `map_period` s; `map_save` writes it under the user's maps folder and,
+with `use`, makes it the map in use.
+
+The work is in `Pilot` (localisation, goals, primitives, places); this class runs its
+control loop at `rate` Hz and moves messages between it and the bus. Nothing is sent to the
+base while nothing drives it, so another program can hold the base when nav is idle.
+"""
+
+from __future__ import annotations
+from importlib import resources
+
+import argparse
+import logging
+import math
+import threading
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from asibot.safety import identity, ownership
+from asibot import keys
+from asibot import messages as m
+from asibot.bus import Bus
+from asibot.errors import RpcError, arguments as _only, quote
+from asibot.safety.estop import EStopState
+from asibot.files import data_dir
+from asibot.runtime import Service
+from asibot.timing import Ticker
+
+from asibot.nav.errors import NavError
+from asibot.nav.geometry import Pose, as_pose
+from asibot.nav.grid import OccupancyGrid
+from asibot.nav.mapfile import LoadedMap, load_map, save_map
+from asibot.nav.pilot import Pilot
+from asibot.nav.places import Places, check_name
+from asibot.nav.planner import Path as PlannedPath
+
+log = logging.getLogger("asibot.nav")
+
+NAME = "nav"
+#: The requests that set the base moving (or stop nav's own motion, localize): before the
+#: first of them for each driver, nav waits (at most HOLD_GRACE s) until the driver names it
+#: as the base's holder (asibot.safety.ownership).
+MOTION_VERBS = frozenset({"goto", "recall_position", "drive", "turn", "primitive", "localize"})
+#: Those that drive the base somewhere: refused at once while another controller holds it.
+#: Not localize: it only forgets where the robot is, while a joystick may drive it around.
+DRIVING_VERBS = MOTION_VERBS - {"localize"}
+HOLD_GRACE = 2.0
+SHIPPED_MAPS = Path(str(resources.files("asibot.maps")))
+
+
+class NavService(Service):
+    """Navigation of one robot on the bus."""
+
+    def __init__(self, bus: Bus, robot: str, loaded: LoadedMap, places: Places, start: Pose, *,
+                 rate: float = 15.0, pose_hz: float = 5.0, status_hz: float = 4.0, map_period: float = 2.0,
+                 clock: Callable[[], float] = time.monotonic, seed: int | None = None,
+                 run_loop: bool = True) -> None:
+        self.bus, self.robot, self.loaded, self.clock = bus, robot, loaded, clock
+        self.rate, self.pose_period, self.status_period = rate, 1.0 / pose_hz, 1.0 / status_hz
+        self.map_period = map_period
+        self._lock = threading.Lock()      # the pilot: the loop and the RPC handlers take turns
+        self.pilot = Pilot(loaded.grid, places, start, on_event=self._event, seed=seed)
+        self._pub_cmd = bus.publisher(keys.base_cmd_vel(robot), m.Twist)
+        self._pub_pose = bus.publisher(keys.nav_pose(robot), m.NavPose)
+        self._pub_path = bus.publisher(keys.nav_path(robot), m.NavPath)
+        self._pub_status = bus.publisher(keys.nav_status(robot), m.NavStatus)
+        self._pub_event = bus.publisher(keys.events(robot), m.Event)
+        self.me = ownership.announce(bus, robot, "base", "nav")
+        self.controller = self.me.id
+        self.holder = ownership.Holder(robot, "base")
+        self.holder.follow(bus)
+        #: Before the first motion for each driver: wait until it names us the holder.
+        self.hold = ownership.HoldWait(bus, robot, "base", self.controller)
+        bus.watch(keys.driver_alive(robot), self.hold.forget)
+        self._latch_map()
+        bus.subscribe(keys.base_odom(robot), m.Odometry, self._on_odom)
+        bus.subscribe(keys.scan(robot), m.LaserScan, self._on_scan, maxsize=1, ring=True)
+        self.estop = EStopState(bus, robot, self._on_estop)
+        for verb in keys.RPC_VERBS_NAV:
+            bus.serve(keys.nav_rpc(robot, verb), self._handler(verb))
+        self.cycles = self.commands = 0
+        self.slowest_cycle = 0.0
+        self._last_pose = self._last_status = self._last_map = -math.inf
+        self._status_sent: tuple | None = None
+        self._path_sent: object = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="nav-loop", daemon=True)
+        if run_loop:
+            self._thread.start()
+
+    # ----------------------------------------------------------------------- inputs
+    def _on_odom(self, msg: m.Odometry) -> None:
+        with self._lock:
+            self.pilot.odometry(self.clock(), msg)
+
+    def _on_scan(self, msg: m.LaserScan) -> None:
+        with self._lock:
+            self.pilot.scan(self.clock(), msg)
+
+    def _on_estop(self, msg: m.EStop) -> None:
+        with self._lock:
+            self.pilot.estop(self.clock(), msg.engaged)
+        self._publish_status(force=True)
+
+    def _event(self, level: str, code: str, text: str) -> None:
+        log.info("event %s/%s: %s", level, code, text)
+        self._pub_event.put(m.Event(level=level, code=code, text=text[:1].upper() + text[1:]))
+
+    # ------------------------------------------------------------------------- loop
+    def _loop(self) -> None:
+        ticker = Ticker(self.rate, stop=self._stop)
+        while ticker.wait():
+            try:
+                self.step()
+            except Exception:   # one bad cycle must not end navigation: stop and go on
+                log.exception("a nav cycle failed; the base is stopped")
+                with self._lock:
+                    self.pilot.stop(self.clock())
+                self._send(0.0, 0.0)
+
+    def step(self) -> None:
+        """One control cycle (the loop calls it at `rate`; tests may call it by hand)."""
+        t0 = time.perf_counter()
+        now = self.clock()
+        with self._lock:
+            cmd = self.pilot.tick(now)
+            pose = self.pilot.pose_message() if now - self._last_pose >= self.pose_period else None
+            path = self.pilot.status().path
+            building = (self.pilot.map_grid() if self.pilot.mapping and self.pilot.mapper.stats.scans
+                        and now - self._last_map >= self.map_period else None)
+        if building is not None:
+            self._last_map = now
+            self._latch_map(building, "mapping")
+        if cmd is not None:
+            self._send(cmd.vx, cmd.wz)
+        if pose is not None:
+            self._last_pose = now
+            self._pub_pose.put(pose)
+        if path is not self._path_sent:
+            self._path_sent = path
+            self._publish_path(path)
+        self._publish_status()
+        self.cycles += 1
+        self.slowest_cycle = max(self.slowest_cycle, time.perf_counter() - t0)
+
+    def _send(self, vx: float, wz: float) -> None:
+        self.commands += 1
+        self.me.put(self._pub_cmd, m.Twist(vx=float(vx), wz=float(wz)))
+
+    def _publish_path(self, path: PlannedPath | None) -> None:
+        gid = self.pilot.status().goal_id or 0
+        if path is None:
+            self._pub_path.put(m.NavPath(goal_id=gid, points=np.zeros((0, 2), np.float32)))
+        else:
+            self._pub_path.put(m.NavPath(goal_id=gid, points=np.asarray(path.points, np.float32),
+                                         length=float(path.length)))
+
+    def _publish_status(self, force: bool = False) -> None:
+        now = self.clock()
+        with self._lock:
+            msg = self.pilot.status_message()
+        what = (msg.goal_id, msg.state, msg.text, msg.driving, msg.localised, msg.speed, msg.width)
+        if force or what != self._status_sent or now - self._last_status >= self.status_period:
+            self._status_sent, self._last_status = what, now
+            self._pub_status.put(msg)
+
+    def _latch_map(self, grid: OccupancyGrid | None = None, name: str = "") -> None:
+        """Latch the map in use (or `grid`, the map being built, under `name`)."""
+        if grid is None:
+            grid, name = self.loaded.grid, self.loaded.yaml_path.stem
+        o = grid.info.origin
+        self.bus.latch(keys.nav_map(self.robot), m.NavMap(
+            resolution=grid.info.resolution, origin=[o.x, o.y, o.theta], data=grid.data, name=name))
+
+    # -------------------------------------------------------------------------- RPC
+    def _handler(self, verb: str) -> Callable[[dict], dict]:
+        rpc = getattr(self, f"_rpc_{verb}")
+
+        def handle(req: dict) -> dict:
+            stop = req.get("name") == "stop"      # never delayed (the bus passes maps only)
+            holder = self.holder.current
+            if verb in DRIVING_VERBS and not stop and holder not in (None, self.controller):
+                raise RpcError("busy", f"Another program drives the base of {self.robot} ({identity.short(holder)}); "
+                                       "stop it first.")
+            if verb in MOTION_VERBS and not stop:
+                self.hold.wait(time.monotonic() + HOLD_GRACE)
+            with self._lock:
+                reply = rpc(self.clock(), req)
+            self._publish_status(force=True)
+            return reply
+        return handle
+
+    def _rpc_goto(self, now: float, req: dict) -> dict:
+        _only(req, "goto", "place", "pose")
+        return self.pilot.goto(now, req.get("place"), req.get("pose"))
+
+    def _rpc_cancel(self, now: float, req: dict) -> dict:
+        _only(req, "cancel", "goal_id")
+        return self.pilot.cancel(now, req.get("goal_id"))
+
+    def _rpc_result(self, now: float, req: dict) -> dict:
+        _only(req, "result", "goal_id")
+        return self.pilot.result(req.get("goal_id"))
+
+    def _rpc_status(self, now: float, req: dict) -> dict:
+        _only(req, "status")
+        msg = self.pilot.status_message()
+        pose = self.pilot.pose()
+        return {**{f: getattr(msg, f) for f in msg._fields if f != "stamp"}, "pose": list(pose)}
+
+    def _rpc_places(self, now: float, req: dict) -> dict:
+        _only(req, "places")
+        return {"places": [{"name": p.name, "pose": list(p.pose)} for p in self.pilot.places.list()]}
+
+    def _rpc_save_place(self, now: float, req: dict) -> dict:
+        """Save a place: here (no pose), or at a pose; `replace` moves an existing one."""
+        _only(req, "save_place", "name", "pose", "replace")
+        pose = as_pose(req["pose"], "pose") if req.get("pose") is not None else self._here()
+        place = self.pilot.places.add(req.get("name"), pose, replace=bool(req.get("replace", False)))
+        return {"name": place.name, "pose": list(place.pose)}
+
+    def _rpc_rename_place(self, now: float, req: dict) -> dict:
+        _only(req, "rename_place", "name", "new_name")
+        place = self.pilot.places.rename(req.get("name"), req.get("new_name"))
+        return {"name": place.name, "pose": list(place.pose)}
+
+    def _rpc_remove_place(self, now: float, req: dict) -> dict:
+        _only(req, "remove_place", "name")
+        place = self.pilot.places.remove(req.get("name"))
+        return {"name": place.name}
+
+    def _rpc_save_position(self, now: float, req: dict) -> dict:
+        _only(req, "save_position")
+        return {"pose": list(self.pilot.places.save_position(self._here()))}
+
+    def _rpc_recall_position(self, now: float, req: dict) -> dict:
+        _only(req, "recall_position")
+        return self.pilot.recall_position(now)
+
+    def _rpc_drive(self, now: float, req: dict) -> dict:
+        """Drive straight `distance` m (negative: backwards), closed-loop, stopping before obstacles."""
+        _only(req, "drive", "distance")
+        d = _number(req.get("distance"), "distance", "m")
+        if d == 0:
+            raise NavError("distance must not be 0; use a positive distance forwards or a negative one backwards.")
+        return self.pilot.drive(now, "forward" if d > 0 else "backward", amount=abs(d))
+
+    def _rpc_turn(self, now: float, req: dict) -> dict:
+        """Turn in place by `angle` degrees (positive: counter-clockwise)."""
+        _only(req, "turn", "angle")
+        a = _number(req.get("angle"), "angle", "deg")
+        if a == 0:
+            raise NavError("angle must not be 0; positive turns left (counter-clockwise), negative right.")
+        return self.pilot.drive(now, "turn left" if a > 0 else "turn right", amount=math.radians(abs(a)))
+
+    def _rpc_primitive(self, now: float, req: dict) -> dict:
+        _only(req, "primitive", "name", "continuous")
+        return self.pilot.drive(now, req.get("name"), continuous=req.get("continuous", False))
+
+    def _rpc_settings(self, now: float, req: dict) -> dict:
+        _only(req, "settings", "change")
+        return self.pilot.settings(req.get("change"))
+
+    def _rpc_set_pose(self, now: float, req: dict) -> dict:
+        _only(req, "set_pose", "pose", "cov")
+        if req.get("pose") is None:
+            raise NavError("set_pose needs a pose [x, y, theta] (m and rad, map frame).")
+        return self.pilot.set_pose(now, req["pose"], req.get("cov"))
+
+    def _rpc_localize(self, now: float, req: dict) -> dict:
+        _only(req, "localize")
+        return self.pilot.localize(now)
+
+    def _rpc_save_map(self, now: float, req: dict) -> dict:
+        """Write the map in use as map_server YAML + PGM under the user's maps folder."""
+        _only(req, "save_map", "name")
+        yaml_path, pgm = save_map(self.pilot.grid, self._map_path(req.get("name", "map")))
+        return {"yaml": str(yaml_path), "pgm": str(pgm)}
+
+    def _map_path(self, name: object) -> Path:
+        """data_dir()/nav/<robot>/maps/<name>.yaml (the folder made); NavError for a path."""
+        if name is None or (isinstance(name, str) and not name.strip()):
+            raise NavError("A map needs a name, for example 'home' (it is saved as home.yaml and home.pgm).")
+        if isinstance(name, str) and ("/" in name or "\\" in name or name.strip().startswith(".")):
+            raise NavError(f"A map name is a plain name, not a path; got {quote(name, 40)}.")
+        name = check_name(name)
+        folder = data_dir() / "nav" / self.robot / "maps"
+        folder.mkdir(parents=True, exist_ok=True)
+        return folder / f"{name}.yaml"
+
+    def _rpc_map_start(self, now: float, req: dict) -> dict:
+        """Start building a new map from the scans while the robot is driven (goals are refused)."""
+        _only(req, "map_start")
+        return self.pilot.map_start(now)
+
+    def _rpc_map_stop(self, now: float, req: dict) -> dict:
+        """Stop mapping; the map is kept to be saved, and the map in use is shown again."""
+        _only(req, "map_stop")
+        reply = self.pilot.map_stop(now)
+        self._latch_map()
+        return reply
+
+    def _rpc_map_save(self, now: float, req: dict) -> dict:
+        """Save the map built (while mapping or after map_stop) as <name>.yaml + .pgm; with `use`,
+        localise and navigate on it from now on (mapping ends)."""
+        _only(req, "map_save", "name", "use")
+        use = req.get("use", False)
+        if not isinstance(use, bool):
+            raise NavError(f"use must be true or false; got {quote(use, 30)}.")
+        path = self._map_path(req.get("name"))
+        summary = self.pilot.mapper.summary() if self.pilot.mapper is not None else ""
+        yaml_path, pgm = save_map(self.pilot.map_grid(), path)
+        reply = {"yaml": str(yaml_path), "pgm": str(pgm), "text": f"saved the map {path.stem!r} ({summary})"}
+        if use:
+            loaded = load_map(yaml_path)     # what was written, exactly as a restart would read it
+            reply["text"] += "; " + self.pilot.use_map(now, loaded.grid)["text"]
+            self.loaded = loaded
+            self._latch_map()
+        return reply
+
+    def _here(self) -> Pose:
+        if not self.pilot.localised:
+            raise NavError("I am not sure where I am, so I cannot save this place; set my position first.")
+        return self.pilot.pose()
+
+    # ---------------------------------------------------------------------- runtime
+    def health(self) -> dict:
+        s = self.pilot.status_message()
+        return {"state": s.state, "localised": s.localised, "mapping": s.mapping, "cycles": self.cycles,
+                "commands": self.commands,
+                "slowest_cycle_ms": round(self.slowest_cycle * 1000, 1), "holder": self.holder.current}
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=1.0)
+        with self._lock:
+            driving = self.pilot.status().state == "active" or self.pilot.primitives.active
+            self.pilot.stop(self.clock())
+        if driving:
+            self._send(0.0, 0.0)
+
+
+def _number(value: object, name: str, unit: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise NavError(f"{name} must be a finite number in {unit}; got {quote(value, 30)}.")
+    return float(value)
+
+
+# -------------------------------------------------------------------------- command line
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--map", default=str(SHIPPED_MAPS / "apartment.yaml"),
+                   help="map_server YAML of the map (default: the sim apartment's)")
+    p.add_argument("--world", default="apartment", help="world whose named places are read (default apartment)")
+    p.add_argument("--initial-pose", default="charging station",
+                   help="where the robot starts: x,y,theta (m, m, rad) or a place name (default 'charging station')")
+    p.add_argument("--rate", type=float, default=15.0, help="control loop, Hz (10-20; default 15)")
+
+
+def _start_pose(text: str, places: Places) -> Pose:
+    parts = text.split(",")
+    if len(parts) == 3:
+        try:
+            return as_pose([float(v) for v in parts], "--initial-pose")
+        except (ValueError, NavError):
+            pass
+    try:
+        return places.get(text).pose
+    except NavError as exc:
+        raise ValueError(f"--initial-pose must be x,y,theta or a place name: {exc.message}") from None
+
+
+def build(bus: Bus, args: argparse.Namespace) -> NavService:
+    if not args.robot:
+        raise ValueError("--robot is required: the robot to navigate, e.g. pioneer-sim")
+    keys.nav_status(args.robot)   # a ValueError with a sentence for a bad robot name
+    if not 5.0 <= args.rate <= 50.0:
+        raise ValueError(f"--rate must be between 5 and 50 Hz; got {args.rate:g}")
+    try:
+        loaded = load_map(args.map)
+    except NavError as exc:
+        raise ValueError(exc.message) from None
+    try:
+        places = Places.for_robot(args.robot, args.world, loaded.grid.info)
+    except NavError as exc:
+        raise ValueError(exc.message) from None
+    start = _start_pose(args.initial_pose, places)
+    if not loaded.grid.info.contains(start.x, start.y):
+        raise ValueError(f"--initial-pose ({start.x:.2f}, {start.y:.2f}) is outside the map ({loaded.grid.info.bounds()})")
+    return NavService(bus, args.robot, loaded, places, start, rate=args.rate)

@@ -1,0 +1,264 @@
+"""The web Task Creator's FastAPI application: the page, its JSON API and its WebSocket.
+
+`create_app(web)` takes everything the routes use (`Web`: the bus-facing parts and the user's
+files), so tests build it on the in-memory bus and a temporary folder, and the service builds
+it on the real router. The page is static files (static/): index.html, our ES modules in
+static/js/ as written, and the npm packages bundled once into static/vendor/ by bootstrap.
+"""
+
+from __future__ import annotations
+from importlib import resources
+
+import asyncio
+import contextlib
+import json
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from fastapi import FastAPI, WebSocket, WebSocketDisconnect
+from fastapi.responses import HTMLResponse, JSONResponse, Response
+from fastapi.staticfiles import StaticFiles
+from pydantic import BaseModel, ConfigDict, StrictBool
+
+from asibot.errors import RpcError
+from asibot.local_http import Callers
+from asibot.web import errors, guard, lan
+from asibot.web.api_files import ICON_LIMIT, IMPORT_LIMIT
+from asibot.web.api_files import router as files_router
+from asibot.web import api_base
+from asibot.web.api_robots import router as robots_router
+from asibot.web.cameras import Cameras
+from asibot.web.fleet import Fleet
+from asibot.web.live import Live
+from asibot.web.motion import Motion
+from asibot.web.runner import ProgramRunner
+from asibot.web.tasks_bus import TaskDesk
+from asibot.web.userdata import UserData
+from asibot.web.voice_relay import MicError, VoiceRelay
+
+STATIC = Path(str(resources.files("asibot.web") / "static"))
+#: The line of index.html after which the page's session token is written.
+CHARSET = '<meta charset="utf-8">'
+#: Largest request body, bytes; uploads have their own, larger limits.
+BODY_LIMIT = 1024 * 1024
+#: Largest text message of the page's WebSocket, characters (a pointer report is about 200).
+PAGE_MESSAGE_LIMIT = 16 * 1024
+UPLOAD_PATHS = {"/api/icons": ICON_LIMIT + 64 * 1024, "/api/import": IMPORT_LIMIT + 64 * 1024}
+
+log = logging.getLogger("asibot.web")
+
+
+@dataclass
+class Web:
+    """What the routes work with."""
+
+    fleet: Fleet
+    motion: Motion
+    data: UserData
+    runner: ProgramRunner
+    live: Live
+    cameras: Cameras
+    tasks: TaskDesk
+    voice: VoiceRelay
+    phones: lan.PhoneAccess = field(default_factory=lan.PhoneAccess)
+    #: Who may call the server (its Host names), and the token its own pages carry (guard.py).
+    callers: Callers = field(default_factory=Callers)
+    session: str = field(default_factory=guard.new_session)
+
+
+class BodyLimit:
+    """Refuse a request body over its limit with 413 and a sentence, before it is read whole
+    (Content-Length first; a chunked body is counted as it arrives)."""
+
+    def __init__(self, app: Any) -> None:
+        self.app = app
+
+    async def __call__(self, scope: dict, receive: Any, send: Any) -> None:
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        limit = UPLOAD_PATHS.get(scope["path"], BODY_LIMIT)
+        too_big = JSONResponse({"error": "bad_request",
+                                "message": f"The request is larger than {limit // 1024} KiB; nothing was changed."},
+                               status_code=413)
+        length = dict(scope.get("headers") or []).get(b"content-length")
+        if length is not None and length.isdigit() and int(length) > limit:
+            return await too_big(scope, receive, send)
+        seen = 0
+
+        async def counted() -> dict:
+            nonlocal seen
+            message = await receive()
+            seen += len(message.get("body", b""))
+            if seen > limit:
+                raise _TooBig()
+            return message
+
+        async def answer(message: dict) -> None:
+            # A body parser that meets _TooBig answers 400 itself: the answer is 413 all the same.
+            if seen <= limit:
+                await send(message)
+            elif message["type"] == "http.response.start":
+                await too_big(scope, receive, send)
+
+        try:
+            await self.app(scope, counted, answer)
+        except _TooBig:
+            await too_big(scope, receive, send)
+
+
+class VoiceSettings(BaseModel):
+    """Ask "Shall I start <task>? Say yes or no." before a task heard by voice starts."""
+    model_config = ConfigDict(extra="forbid")
+    confirm: StrictBool
+
+
+class _TooBig(Exception):
+    pass
+
+
+def create_app(web: Web) -> FastAPI:
+    @contextlib.asynccontextmanager
+    async def lifespan(app: FastAPI):
+        pusher = asyncio.create_task(web.live.pusher())
+        try:
+            yield
+        finally:
+            pusher.cancel()
+
+    app = FastAPI(title="ASIBOT Task Creator", lifespan=lifespan)
+    app.state.web = web
+    errors.install(app)
+    app.include_router(robots_router)
+    app.include_router(files_router)
+    app.include_router(api_base.router)
+
+    @app.get("/api/voice", summary="the voice service's settings (ask yes first before a task heard starts)")
+    async def voice_settings() -> dict:
+        return await asyncio.to_thread(web.voice.settings)
+
+    @app.put("/api/voice", summary="change the voice service's settings")
+    async def change_voice_settings(change: VoiceSettings) -> dict:
+        return await asyncio.to_thread(web.voice.settings, change.confirm)
+
+    @app.get("/api/phone", summary="how a phone or tablet reaches this page (LAN mode: its address and token)")
+    def phone() -> dict:
+        return web.phones.json()
+
+    @app.get("/api/phone/qr.png", summary="the QR code of the first LAN address, for a phone's camera",
+             response_class=Response)
+    def phone_qr() -> Response:
+        urls = web.phones.urls
+        if not urls:
+            raise RpcError("unavailable", "This page is served to this computer only: there is no LAN address "
+                                          "to show (start the web service with --lan).")
+        return Response(lan.qr_png(urls[0]), media_type="image/png", headers={"Cache-Control": "no-store"})
+
+    @app.get("/api/config", summary="what the page needs to draw its controls")
+    def config() -> dict:
+        return {"jog": web.motion.settings.as_json(), "base": api_base.config(),
+                "pointer": web.motion.pointer.settings.page()}
+
+    @app.websocket("/ws")
+    async def feed(socket: WebSocket) -> None:
+        await socket.accept()
+        page = await web.live.attach(socket)
+        sender = asyncio.create_task(web.live.drain(page))
+        try:
+            while True:
+                message = await socket.receive()
+                if message["type"] == "websocket.disconnect":
+                    break
+                if message.get("bytes") is not None:
+                    _on_page_sound(web, page, message["bytes"])
+                elif message.get("text") is not None:
+                    await _on_page_message(web, page, message["text"])
+        except WebSocketDisconnect:
+            pass
+        finally:
+            web.live.detach(page)
+            sender.cancel()
+            _stop_listening(page)
+            if page.holding:  # a closed tab must not leave a hold-to-move running
+                await asyncio.to_thread(_stop_quietly, web, page.holding)
+
+    @app.get("/", include_in_schema=False)
+    def index() -> HTMLResponse:
+        # Read each time (edit and reload); it carries the session token, so no cache keeps it.
+        page = (STATIC / "index.html").read_text(encoding="utf-8").replace(
+            CHARSET, f'{CHARSET}\n  <meta name="{guard.META}" content="{web.session}">', 1)
+        return HTMLResponse(page, headers={"Cache-Control": "no-store"})
+
+    app.mount("/static", StaticFiles(directory=STATIC), name="static")
+    return guard.PageGuard(BodyLimit(app), web.callers, web.session)  # type: ignore[return-value]
+
+
+def _stop_quietly(web: Web, robot: str) -> None:
+    try:
+        web.motion.stop(robot)
+    except RpcError as exc:
+        log.info("stop of %s after a hold: %s", robot, exc)
+
+
+def _stop_listening(page) -> None:
+    if page.mic is not None:
+        page.mic.close()
+    page.mic, page.mic_rate = None, None
+
+
+def _on_page_sound(web: Web, page, data: bytes) -> None:
+    """A frame of the page's microphone: on to the voice service. A bad frame stops the
+    listening with the sentence (a broken page must not flood the voice service or itself)."""
+    if page.mic_rate is None:
+        return    # frames still on their way after the page stopped listening
+    try:
+        web.voice.chunk(page.id, page.mic_rate, data)
+    except MicError as exc:
+        _stop_listening(page)
+        page.offer(json.dumps({"type": "mic-stopped", "text": str(exc)}))
+
+
+def _tool_pitch(web: Web, robot: str) -> float | None:
+    """The tool's rot(y') now, deg (a gamepad's stick leads it), or None before a Cartesian state."""
+    point = web.fleet.point(robot)
+    return None if point is None or len(point) < 4 else point[3]
+
+
+async def _on_page_message(web: Web, page, text: str) -> None:
+    """Streams over the socket: `hold` beats while a jog button is held and `point` reports of a
+    handheld pointer (asibot.web.pointer), `release` when either ends; `mic` starts or stops
+    the page's microphone."""
+    try:
+        if len(text) > PAGE_MESSAGE_LIMIT:
+            raise ValueError("too long")
+        msg = json.loads(text)
+        kind = msg["type"]
+    except (ValueError, KeyError, TypeError, RecursionError):   # RecursionError: JSON nested too deep
+        await page.socket.send_text(json.dumps({"type": "refused", "text": "The page sent a message the server does not understand."}))
+        return
+    if kind == "mic":             # the page starts listening (rate: Hz) or stops (rate: null)
+        _stop_listening(page)
+        if msg.get("rate") is not None:
+            try:
+                page.mic = web.voice.start(page.id, msg.get("rate"))
+                page.mic_rate = msg["rate"]
+            except MicError as exc:
+                page.offer(json.dumps({"type": "refused", "text": str(exc)}))
+    elif kind in ("hold", "point"):
+        robot = msg.get("robot")
+        try:
+            if robot not in web.fleet.ids():
+                raise RpcError("unavailable", f"Robot {robot!r} is not connected.")
+            page.holding = robot
+            if kind == "hold":
+                await asyncio.to_thread(web.motion.hold, robot, msg.get("space"), msg.get("axis"),
+                                        msg.get("direction"), msg.get("level"))
+            else:
+                await asyncio.to_thread(web.motion.point, robot, msg, _tool_pitch(web, robot))
+        except RpcError as exc:
+            page.offer(json.dumps({"type": "refused", "code": exc.code, "text": exc.message}))
+    elif kind == "release":
+        robot, page.holding = page.holding, None
+        if robot:
+            await asyncio.to_thread(_stop_quietly, web, robot)

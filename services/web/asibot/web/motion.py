@@ -1,0 +1,224 @@
+"""What the page's buttons do to a robot: jog steps, hold-to-move, moves, stop, estop, gripper.
+
+Every motion goes through the robot's kinematics service (its RPC verbs), exactly as a user
+program's `CartesianClient` does, so the web page has no privileges a program lacks and the
+controller's checks (limits, reach, estop, the 200 ms watchdog of streamed velocities) apply
+to it too. Refusals come back as `RpcError` with the controller's sentence for the page.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+from asibot.safety import estop
+from asibot import keys, robots
+from asibot.bus import Bus
+from asibot.errors import RpcError
+from asibot.safety.estop import who
+from asibot.safety.identity import Identity
+from asibot.poses import POINT_AXES
+from asibot.web.pointer import DeviceReading, PointerMapping
+
+#: The five speed levels of the jog buttons, as fractions of the jog speeds below.
+SPEED_LEVELS = (0.1, 0.25, 0.5, 0.75, 1.0)
+#: Hold-to-move speeds at the top level: linear m/s, angular deg/s, joint deg/s.
+HOLD_LINEAR, HOLD_ANGULAR, HOLD_JOINT = 0.10, 20.0, 20.0
+#: A step of a movl at the top level moves at this linear speed, m/s.
+STEP_LINEAR_SPEED = 0.10
+#: The seed's jog steps (WebResponder.hpp): 5 deg a joint, 0.10 m and 15 deg a Cartesian axis.
+JOINT_STEP, LINEAR_STEP, ANGULAR_STEP = 5.0, 0.10, 15.0
+#: Longest RPC wait for a quick verb, s.
+CALL_TIMEOUT = 5.0
+
+
+@dataclass(frozen=True)
+class JogSettings:
+    """What the page needs to draw its jog controls; sent once, so no unit lives in JavaScript."""
+
+    speed_levels: tuple[float, ...] = SPEED_LEVELS
+    joint_step: float = JOINT_STEP
+    linear_step: float = LINEAR_STEP
+    angular_step: float = ANGULAR_STEP
+    hold_linear: float = HOLD_LINEAR
+    hold_angular: float = HOLD_ANGULAR
+    hold_joint: float = HOLD_JOINT
+
+    def as_json(self) -> dict[str, Any]:
+        return {"speed_levels": list(self.speed_levels), "joint_step_deg": self.joint_step,
+                "linear_step_m": self.linear_step, "angular_step_deg": self.angular_step,
+                "point_axes": [{"name": n, "unit": u} for n, u in POINT_AXES]}
+
+
+def _whole(value: object) -> bool:
+    """An int that is not a bool (JSON's `true` is not the number 1 here)."""
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _level(level: int) -> float:
+    if not _whole(level) or not 1 <= level <= len(SPEED_LEVELS):
+        raise RpcError("bad_request", f"The speed level must be 1 to {len(SPEED_LEVELS)}; got {level!r}.")
+    return SPEED_LEVELS[level - 1]
+
+
+def _direction(direction: int) -> int:
+    if not _whole(direction) or direction not in (-1, 1):
+        raise RpcError("bad_request", f"The direction must be -1 or 1; got {direction!r}.")
+    return direction
+
+
+class Motion:
+    """The robot actions of the web page, each one bus call (or two) to the kinematics service."""
+
+    def __init__(self, bus: Bus, settings: JogSettings = JogSettings(), who: str = "web page",
+                 pointer: PointerMapping | None = None) -> None:
+        self.bus = bus
+        self.settings = settings
+        self.pointer = pointer or PointerMapping()
+        self.who = who
+        self.me = Identity("web")      # signs the page's estops and releases (asibot.safety.estop)
+        self._lock = threading.Lock()
+        self._steps: dict[str, tuple[str, list[float]]] = {}   # robot -> the last step's target
+
+    def _call(self, robot: str, verb: str, timeout: float = CALL_TIMEOUT, **request: Any) -> dict:
+        return self.bus.call(keys.cart_rpc(robot, verb), request, timeout=timeout)
+
+    def _joints(self, robot: str) -> int:
+        try:
+            return len(robots.get(robot).joint_names)
+        except KeyError:
+            raise RpcError("bad_request", f"There is no robot {robot!r}; choose one of {', '.join(robots.ids())}.") from None
+
+    # --- jogging --------------------------------------------------------------------------
+    def step_joint(self, robot: str, joint: int, direction: int, level: int, step: float | None = None) -> dict:
+        """Move one joint (0 for the first) by one step, deg."""
+        n = self._joints(robot)
+        if not isinstance(joint, int) or not 0 <= joint < n:
+            raise RpcError("bad_request", f"The joint must be 0 to {n - 1} (this arm has {n}); got {joint!r}.")
+        delta = _direction(direction) * (self.settings.joint_step if step is None else step)
+        speed = _level(level)
+
+        def then(target: list[float]) -> list[float]:
+            return [v + (delta if i == joint else 0.0) for i, v in enumerate(target)]
+        return self._step(robot, "joints", then, lambda q: self._call(robot, "movj", joints=q, speed=speed))
+
+    def step_axis(self, robot: str, axis: int, direction: int, level: int, step: float | None = None) -> dict:
+        """Move the tool one step along (or about) one axis of the point with a movl."""
+        if not isinstance(axis, int) or not 0 <= axis < len(POINT_AXES):
+            raise RpcError("bad_request", f"The axis must be 0 to {len(POINT_AXES) - 1} (x, y, z, rot(y'), rot(z'')); got {axis!r}.")
+        if step is None:
+            step = self.settings.linear_step if axis < 3 else self.settings.angular_step
+        delta, speed = _direction(direction) * step, STEP_LINEAR_SPEED * _level(level)
+
+        def then(target: list[float]) -> list[float]:
+            return [v + (delta if i == axis else 0.0) for i, v in enumerate(target)]
+        return self._step(robot, "point", then, lambda p: self._call(robot, "movl", point=p, speed=speed))
+
+    def _step(self, robot: str, space: str, then: Any, start: Any) -> dict:
+        """Steps add up: a step touched while the previous one still moves goes on from that
+        step's target (the arm does not stop short), as jog buttons on a pendant do."""
+        with self._lock:
+            now = self._call(robot, "stat")
+            previous = self._steps.get(robot)
+            moving = now["state"] in ("movj", "movl")
+            base = previous[1] if moving and previous and previous[0] == space else now[space]
+            target = then(list(base))
+            if moving:
+                self._call(robot, "stop")
+            try:
+                reply = start(target)
+            except RpcError:
+                self._steps.pop(robot, None)
+                raise
+            self._steps[robot] = (space, target)
+            return reply
+
+    def hold_velocity(self, space: str, axis: int, direction: int, level: int, n_joints: int) -> list[float]:
+        """The velocity one held jog button streams: one axis (or joint) at the level's speed."""
+        size = n_joints if space == "joint" else len(POINT_AXES)
+        if space not in ("joint", "cartesian"):
+            raise RpcError("bad_request", f"The space must be 'joint' or 'cartesian'; got {space!r}.")
+        if not _whole(axis) or not 0 <= axis < size:
+            raise RpcError("bad_request", f"The axis must be 0 to {size - 1}; got {axis!r}.")
+        if space == "joint":
+            top = self.settings.hold_joint
+        else:
+            top = self.settings.hold_linear if axis < 3 else self.settings.hold_angular
+        v = [0.0] * size
+        v[axis] = _direction(direction) * top * _level(level)
+        return v
+
+    def hold(self, robot: str, space: str, axis: int, direction: int, level: int) -> dict:
+        """One beat of hold-to-move: the page repeats it while the button is held; when the
+        beats stop (pointer up, blur, tab closed, network lost) the controller's watchdog stops
+        the arm within 200 ms, and the page also sends `stop` at once."""
+        v = self.hold_velocity(space, axis, direction, level, self._joints(robot))
+        if space == "joint":
+            return self._call(robot, "movjv", velocity=v)
+        return self._call(robot, "movv", velocity=v)
+
+    def point(self, robot: str, message: dict[str, Any], tool_pitch: float | None) -> dict:
+        """One report of a handheld pointer (asibot.web.pointer): the arm follows it while the
+        dead-man and a direction are on, and holds still (a `pointer` with the dead-man off, which
+        ends the stream at once) otherwise. A bad report stops the arm (a device that sends
+        NaN mid-stream must not leave it moving until the watchdog) and raises bad_request."""
+        self._joints(robot)
+        try:
+            reading = DeviceReading.from_message(message)
+        except RpcError:
+            self._call(robot, "pointer", deadman=False)
+            raise
+        request = self.pointer.request(reading, tool_pitch)
+        return self._call(robot, "pointer", **(request or {"deadman": False}))
+
+    # --- moves ----------------------------------------------------------------------------
+    def move(self, robot: str, kind: str, values: Sequence[float], *, relative: bool = False,
+             joints: bool = False, level: int = 3) -> dict:
+        """The seed's movj/movl forms: to a point (or joints) or by an offset from here."""
+        if kind not in ("movj", "movl"):
+            raise RpcError("bad_request", f"The movement must be 'movj' or 'movl'; got {kind!r}.")
+        values = [float(v) for v in values]
+        if not all(math.isfinite(v) for v in values):
+            raise RpcError("bad_request", "Every value must be a finite number.")
+        if joints:
+            if kind != "movj":
+                raise RpcError("bad_request", "Joint values move with movj; movl takes a point.")
+            if relative:
+                return self._call(robot, "relj", joints=values, speed=_level(level))
+            return self._call(robot, "movj", joints=values, speed=_level(level))
+        if relative:
+            here = self._call(robot, "stat")["point"]
+            if len(values) != len(here):
+                raise RpcError("bad_request", f"An offset needs {len(here)} numbers; got {len(values)}.")
+            values = [a + b for a, b in zip(here, values)]
+        if kind == "movl":
+            return self._call(robot, "movl", point=values, speed=STEP_LINEAR_SPEED * _level(level))
+        return self._call(robot, "movj", point=values, speed=_level(level))
+
+    def inverse(self, robot: str, point: Sequence[float]) -> list[float]:
+        """Joints (deg) that put the tool at `point`; nothing moves."""
+        return self._call(robot, "inv", point=[float(v) for v in point])["joints"]
+
+    def home(self, robot: str, level: int = 3) -> dict:
+        return self._call(robot, "home", speed=_level(level))
+
+    def stop(self, robot: str) -> dict:
+        return self._call(robot, "stop")
+
+    def grip(self, robot: str, close: bool) -> dict:
+        return self._call(robot, "act", timeout=8.0, action="close" if close else "open")
+
+    # --- safety ---------------------------------------------------------------------------
+    def estop(self, robot: str) -> None:
+        """Engage the robot's emergency stop (latched: it holds after this server exits)."""
+        estop.latch(self.bus, robot, self.me, True, f"emergency stop from the {self.who}",
+                    who(f"the {self.who}", login_of=self.bus.name))
+
+    def release(self, robot: str) -> None:
+        estop.latch(self.bus, robot, self.me, False, f"released from the {self.who}",
+                    who(f"the {self.who}", login_of=self.bus.name))
+
+    def reset_fault(self, robot: str) -> dict:
+        return self.bus.call(keys.driver_rpc(robot, "reset_fault"), timeout=CALL_TIMEOUT)
