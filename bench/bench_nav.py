@@ -32,7 +32,7 @@ from asibot.nav.places import Places, world_places_file
 
 from table import print_table  # bench/table.py: run as `python bench/<name>.py`
 
-MAP = Path(__file__).resolve().parents[1] / "services" / "sim" / "maps" / "apartment.yaml"
+MAP = Path(__file__).resolve().parents[1] / "libs" / "common" / "asibot" / "maps" / "apartment.yaml"
 
 
 def p50_ms(fn, repeat: int = 30) -> float:

@@ -11,7 +11,7 @@ from asibot.asterics_bridge import grids
 from asibot.asterics_bridge import vocabulary as vocab
 from asibot.asterics_bridge.servers import DEFAULT_HTTP_PORT, DEFAULT_TCP_PORT
 
-SETUPS = Path(__file__).resolve().parents[2] / "services" / "asterics_bridge" / "setups"
+SETUPS = Path(__file__).resolve().parents[2] / "services" / "asterics_bridge" / "asibot" / "asterics_bridge" / "setups"
 GRIDS = SETUPS / "asibot-robot.grd.json"
 MODEL = SETUPS / "switch-scanning-netconnection.acs"
 

@@ -23,3 +23,12 @@ def spawn(router):
     for p in procs:
         p.kill()
         p.wait()
+
+
+@pytest.fixture(params=["zenoh", "memory"])
+def endpoint(request):
+    """Each backend in turn: a real Zenoh router, then the in-memory bus."""
+    if request.param == "zenoh":
+        yield request.getfixturevalue("router")
+    else:
+        yield f"mem://{request.node.name}"

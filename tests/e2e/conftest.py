@@ -10,7 +10,7 @@ import pytest
 from asibot.testing import Stack
 
 ROOT = Path(__file__).resolve().parents[2]
-EXAMPLES = ROOT / "libs" / "common" / "examples"
+EXAMPLES = ROOT / "libs" / "common" / "asibot" / "examples"
 
 
 @pytest.fixture

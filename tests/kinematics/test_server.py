@@ -18,7 +18,7 @@ from asibot.testing import wait_until, release
 
 from .conftest import ROBOT, build, teardown
 
-TEMPLATE = Path(__file__).resolve().parents[2] / "libs" / "common" / "examples" / "template.py"
+TEMPLATE = Path(__file__).resolve().parents[2] / "libs" / "common" / "asibot" / "examples" / "template.py"
 
 
 def test_stat_inv_fwd_in_user_units(client):

@@ -9,7 +9,7 @@ import pytest
 from asibot.nav.mapfile import LoadedMap, load_map
 from asibot.nav.places import Places, world_places_file
 
-MAPS = Path(__file__).resolve().parents[2] / "services" / "sim" / "maps"
+MAPS = Path(__file__).resolve().parents[2] / "libs" / "common" / "asibot" / "maps"
 
 
 @pytest.fixture(scope="session")

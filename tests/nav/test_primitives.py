@@ -10,7 +10,7 @@ import pytest
 from asibot.nav.errors import NavError
 from asibot.nav.geometry import Pose, relative
 from asibot.nav.grid import GridInfo, OccupancyGrid
-from asibot.nav.primitives import PRIMITIVES, Primitives, Settings
+from asibot.nav.primitives import PRIMITIVES, Motion, Primitives, Settings
 
 from .tinysim import TinySim
 
@@ -26,7 +26,7 @@ def room():
 
 
 def run(room, name: str, start: Pose = START, continuous: bool = False, settings: Settings | None = None,
-        limit: float = 40.0, seed: int = 4) -> tuple[TinySim, Primitives, str]:
+        limit: float = 40.0, seed: int = 4) -> tuple[TinySim, Primitives, Motion]:
     sim = TinySim(room, pose=start, odom=Pose(0.0, 0.0, 0.0), seed=seed)
     prim = Primitives(settings or Settings())
     now, dt = 0.0, 0.05
@@ -41,7 +41,7 @@ def run(room, name: str, start: Pose = START, continuous: bool = False, settings
     for _ in range(20):                 # let the ramp bring it to rest
         sim.step(0.0, 0.0, dt)
     assert motion is not None and not motion.active
-    return sim, prim, motion.text
+    return sim, prim, motion
 
 
 def moved(sim: TinySim, start: Pose = START) -> Pose:
@@ -50,9 +50,9 @@ def moved(sim: TinySim, start: Pose = START) -> Pose:
 
 @pytest.mark.parametrize("name, sign", [("forward", 1), ("backward", -1)])
 def test_a_step_is_one_metre_within_5_cm(room, name, sign):
-    sim, _, text = run(room, name)                     # width 3: 1 m steps
+    sim, _, end = run(room, name)                     # width 3: 1 m steps
     d = moved(sim)
-    assert text == f"{name}: done"
+    assert end.done and end.text == f"{name}: done"
     assert abs(d.x - sign * 1.0) <= 0.05 and abs(d.y) <= 0.05 and abs(d.theta) <= math.radians(3)
     assert not sim.collided
 
@@ -60,18 +60,18 @@ def test_a_step_is_one_metre_within_5_cm(room, name, sign):
 @pytest.mark.parametrize("name, angle", [("turn left 90", 90.0), ("turn right 90", -90.0),
                                          ("turn around", 180.0), ("turn left", 45.0), ("turn right", -45.0)])
 def test_turns_end_within_5_degrees(room, name, angle):
-    sim, _, text = run(room, name)
+    sim, _, end = run(room, name)
     d = moved(sim)
     err = math.degrees(math.remainder(d.theta - math.radians(angle), 2 * math.pi))
     assert abs(err) <= 5.0, f"{name}: {math.degrees(d.theta):.1f} deg"
-    assert math.hypot(d.x, d.y) < 0.03 and text == f"{name}: done"
+    assert math.hypot(d.x, d.y) < 0.03 and end.done and end.text == f"{name}: done"
 
 
 @pytest.mark.parametrize("name, direction, side", [("curve forward left", 1, 1), ("curve forward right", 1, -1),
                                                    ("curve backward left", -1, 1), ("curve backward right", -1, -1)])
 def test_curves_end_on_their_arc(room, name, direction, side):
-    sim, _, text = run(room, name)                          # width 3: 1 m along a 0.8 m radius
-    assert text == f"{name}: done"
+    sim, _, end = run(room, name)                          # width 3: 1 m along a 0.8 m radius
+    assert end.done and end.text == f"{name}: done"
     phi = 1.0 / 0.8
     d = moved(sim)
     want = Pose(direction * 0.8 * math.sin(phi), side * 0.8 * (1 - math.cos(phi)), direction * side * phi)
@@ -81,8 +81,8 @@ def test_curves_end_on_their_arc(room, name, direction, side):
 
 def test_stops_before_a_wall(room):
     facing_wall = Pose(4.0, 1.2, -math.pi / 2)             # the wall's face is at y = 0.05
-    sim, _, text = run(room, "forward", facing_wall, continuous=True)
-    assert text.startswith("stopped: obstacle ahead, ")
+    sim, _, end = run(room, "forward", facing_wall, continuous=True)
+    assert not end.done and end.text.startswith("stopped: obstacle ahead, ")
     assert not sim.collided
     front = sim.pose.y - 0.313 - 0.05
     assert 0.0 < front <= 0.35                              # close, but not touching
@@ -90,13 +90,13 @@ def test_stops_before_a_wall(room):
 
 def test_a_turn_beside_a_wall_is_refused(room):
     tight = Pose(4.0, 0.38, 0.0)                            # side 0.08 m from the wall: corners would hit
-    sim, _, text = run(room, "turn left 90", tight)
-    assert text.startswith("stopped: obstacle beside the robot") and not sim.collided
+    sim, _, end = run(room, "turn left 90", tight)
+    assert not end.done and end.text.startswith("stopped: obstacle beside the robot") and not sim.collided
 
 
 def test_continuous_motion_ends_at_the_longest_time(room):
-    sim, _, text = run(room, "turn left", continuous=True, settings=Settings(longest_s=2.0))
-    assert text == "stopped: 2 s is the longest a motion lasts"
+    sim, _, end = run(room, "turn left", continuous=True, settings=Settings(longest_s=2.0))
+    assert not end.done and end.text == "stopped: 2 s is the longest a motion lasts"
     assert abs(moved(sim).theta) > math.radians(30)
 
 

@@ -31,7 +31,7 @@ from asibot.recorder.reader import iter_messages, summarize
 ROOT = Path(__file__).resolve().parents[2]
 ROBOT = "pioneer-sim"
 FIXTURE = ROOT / "recordings" / "fixtures" / "nav_drive.mcap"
-MAP = ROOT / "services" / "sim" / "maps" / "apartment.yaml"
+MAP = ROOT / "libs" / "common" / "asibot" / "maps" / "apartment.yaml"
 CAMERAS = ("front", "back")
 TYPES = {keys.base_odom(ROBOT): m.Odometry, keys.base_sonar(ROBOT): m.Sonar, keys.scan(ROBOT): m.LaserScan,
          keys.nav_pose(ROBOT): m.NavPose, keys.sim_truth(ROBOT): m.Pose2D, keys.base_cmd_vel(ROBOT): m.Twist,

@@ -189,7 +189,7 @@ def test_a_task_launched_with_space_alone_in_step_scanning(page, kitchen, task):
     assert last_run(kitchen)["last"]["program"] == TASK
 
 
-RED_CAN = ROOT / "libs" / "common" / "examples" / "give_me_the_red_can.py"
+RED_CAN = ROOT / "libs" / "common" / "asibot" / "examples" / "give_me_the_red_can.py"
 
 
 def test_the_red_can_is_fetched_with_one_switch(page, kitchen, released):

@@ -22,7 +22,7 @@ from .conftest import CHROMIUM, CHROMIUM_ARGS, _stack, screenshot
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
 ROBOT = "asibot-sim"
-RED_CAN = Path(__file__).resolve().parents[2] / "libs" / "common" / "examples" / "give_me_the_red_can.py"
+RED_CAN = Path(__file__).resolve().parents[2] / "libs" / "common" / "asibot" / "examples" / "give_me_the_red_can.py"
 
 
 def spoken(folder: Path, text: str) -> Path:

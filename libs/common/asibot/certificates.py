@@ -33,7 +33,9 @@ def this_machine() -> list[str]:
     names = {socket.gethostname(), socket.getfqdn()}
     try:
         for info in socket.getaddrinfo(socket.gethostname(), None, socket.AF_INET):
-            names.add(info[4][0])
+            address = info[4][0]
+            if isinstance(address, str):  # always, for AF_INET: (host, port)
+                names.add(address)
     except OSError:
         pass
     return sorted(n for n in names if n and not n.startswith("127.") and n != "localhost")
@@ -68,7 +70,7 @@ def ensure_router_certificate(folder: Path, names: list[str] | None = None) -> t
     issued again by the same CA, so no client needs a new ca.pem."""
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes, serialization
-    from cryptography.hazmat.primitives.asymmetric import ec
+    from cryptography.hazmat.primitives.asymmetric import dsa, ec, rsa
     from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
     ca_path, cert_path, key_path = folder / CA, folder / ROUTER, folder / ROUTER_KEY
@@ -81,7 +83,12 @@ def ensure_router_certificate(folder: Path, names: list[str] | None = None) -> t
 
     if ca_path.exists() and (folder / CA_KEY).exists():
         ca = x509.load_pem_x509_certificate(ca_path.read_bytes())
-        ca_key = serialization.load_pem_private_key((folder / CA_KEY).read_bytes(), password=None)
+        loaded = serialization.load_pem_private_key((folder / CA_KEY).read_bytes(), password=None)
+        # Ours is EC; one put there by hand may be any key that signs with SHA-256.
+        if not isinstance(loaded, (ec.EllipticCurvePrivateKey, rsa.RSAPrivateKey, dsa.DSAPrivateKey)):
+            raise ValueError(f"{folder / CA_KEY} cannot sign certificates with SHA-256 (it is a "
+                             f"{type(loaded).__name__}); remove {CA} and {CA_KEY} there to make a new CA")
+        ca_key = loaded
     else:
         ca_key = ec.generate_private_key(ec.SECP256R1())
         ca_name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, f"asibot robot CA ({socket.gethostname()})")])

@@ -73,22 +73,30 @@ class _Client:
             raise RpcError("bad_request", "Call open(robot) first.")
         return self._bus
 
+    def _opened(self) -> str:
+        """The robot open() connected to."""
+        if self.robot is None:
+            raise RpcError("bad_request", "Call open(robot) first.")
+        return self.robot
+
     # --- safety: every client can stop its robot -------------------------------------------
     def estop(self, reason: str = "emergency stop from a program") -> None:
         """Engage the robot's emergency stop: it stops at once and refuses every motion until
         release(). The drivers and the controller keep it latched, so it holds after this program
         ends (asibot.safety.estop); their events say who engaged it (this user, program and pid)."""
-        estop.latch(self._connected(), self.robot, self._me, True, reason, who(login_of=self._bus.name))
+        bus = self._connected()
+        estop.latch(bus, self._opened(), self._me, True, reason, who(login_of=bus.name))
 
     def release(self, reason: str = "released from a program") -> None:
         """Release the emergency stop. Nothing moves by itself afterwards: the robot moves again
         only on a motion request made after the release. The drivers' events say who released it."""
-        estop.latch(self._connected(), self.robot, self._me, False, reason, who(login_of=self._bus.name))
+        bus = self._connected()
+        estop.latch(bus, self._opened(), self._me, False, reason, who(login_of=bus.name))
 
     def reset_fault(self) -> dict:
         """Ask the robot's driver to clear a fault (re-initialise the drive that failed);
         raises RpcError with the driver's sentence when the fault is still there."""
-        return self._connected().call(keys.driver_rpc(self.robot, "reset_fault"), timeout=self.timeout)
+        return self._connected().call(keys.driver_rpc(self._opened(), "reset_fault"), timeout=self.timeout)
 
 
 class CartesianClient(_Client):
@@ -97,7 +105,7 @@ class CartesianClient(_Client):
     _probe, _service = "stat", "kinematics"
 
     def _key(self, verb: str) -> str:
-        return keys.cart_rpc(self.robot, verb)
+        return keys.cart_rpc(self._opened(), verb)
 
     # --- the seed's verbs ---------------------------------------------------------------
     def stat(self, res: list | None = None) -> list[float]:
@@ -189,7 +197,7 @@ class NavClient(_Client):
     _probe, _service = "status", "nav"
 
     def _key(self, verb: str) -> str:
-        return keys.nav_rpc(self.robot, verb)
+        return keys.nav_rpc(self._opened(), verb)
 
     def goto(self, target: str | Sequence[float]) -> int:
         """Go to a named place ("fridge") or a pose (x, y, theta in m, m, rad, map frame);

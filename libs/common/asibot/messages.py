@@ -235,58 +235,58 @@ def _checker(tp: Any, field: str, type_name: str) -> Callable[[Any], Any]:
 
     origin = typing.get_origin(tp)
     if tp is float:
-        def check(v: Any) -> float:
+        def check_number(v: Any) -> float:
             if isinstance(v, bool) or not isinstance(v, (int, float)):
                 fail(v, "a number")
             return float(v)
-        return check
+        return check_number
     if tp is int:
-        def check(v: Any) -> int:
+        def check_int(v: Any) -> int:
             if isinstance(v, bool) or not isinstance(v, int):
                 fail(v, "an integer")
             return v
-        return check
+        return check_int
     if tp is bool:
-        def check(v: Any) -> bool:
+        def check_bool(v: Any) -> bool:
             if not isinstance(v, bool):
                 fail(v, "true or false")
             return v
-        return check
+        return check_bool
     if tp is str:
-        def check(v: Any) -> str:
+        def check_str(v: Any) -> str:
             if not isinstance(v, str):
                 fail(v, "a string")
             return v
-        return check
+        return check_str
     if tp is bytes:
-        def check(v: Any) -> bytes:
+        def check_bytes(v: Any) -> bytes:
             if not isinstance(v, (bytes, bytearray)):
                 fail(v, "bytes")
             return bytes(v)
-        return check
+        return check_bytes
     if tp is np.ndarray:
-        def check(v: Any) -> np.ndarray:
+        def check_array(v: Any) -> np.ndarray:
             if not isinstance(v, np.ndarray):
                 fail(v, "a numpy array")
             return v
-        return check
+        return check_array
     if origin is list:
         (item_tp,) = typing.get_args(tp) or (Any,)
         item = _checker(item_tp, field + "[]", type_name)
 
-        def check(v: Any) -> list:
+        def check_list(v: Any) -> list:
             if isinstance(v, np.ndarray):
                 v = v.tolist()
             if not isinstance(v, (list, tuple)):
                 fail(v, "a list")
             return [item(x) for x in v]
-        return check
+        return check_list
     if origin is dict or tp is dict:
-        def check(v: Any) -> dict:
+        def check_map(v: Any) -> dict:
             if not isinstance(v, dict):
                 fail(v, "a map")
             return v
-        return check
+        return check_map
     if tp is Any:
         return lambda v: v
     raise TypeError(f"{type_name}.{field}: unsupported field type {tp!r}")
@@ -298,6 +298,12 @@ class Message:
     """Every message type derives from this: a dataclass with `stamp` (ns, producer clock; keyword
     only), registered by its class name and checked field by field when decoded."""
     stamp: int = dataclasses.field(default_factory=now_ns, kw_only=True)
+    # Filled per type by __init_subclass__: field names in wire order, those without a default,
+    # a check per field, and whether a field may hold a large array or bytes.
+    _fields: typing.ClassVar[tuple[str, ...]]
+    _required: typing.ClassVar[tuple[str, ...]]
+    _checks: typing.ClassVar[dict[str, Callable[[Any], Any]]]
+    _bulky: typing.ClassVar[bool]
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -305,15 +311,15 @@ class Message:
         hints = typing.get_type_hints(cls)
         # `stamp` last, as on the wire since the first recordings (a map's order is its bytes).
         fields = sorted(dataclasses.fields(cls), key=lambda f: f.name == "stamp")
-        cls._fields = tuple(f.name for f in fields)  # type: ignore[attr-defined]
-        cls._required = tuple(  # type: ignore[attr-defined]
+        cls._fields = tuple(f.name for f in fields)
+        cls._required = tuple(
             f.name for f in fields
             if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
         )
-        cls._checks = {f.name: _checker(hints[f.name], f.name, cls.__name__) for f in fields}  # type: ignore[attr-defined]
+        cls._checks = {f.name: _checker(hints[f.name], f.name, cls.__name__) for f in fields}
         # Only messages with fields that may hold a large array or bytes look for them in encode()
         # (the bytes are the same either way; this only spares small messages the search).
-        cls._bulky = any(hints[f.name] in (np.ndarray, bytes, Any) for f in fields)  # type: ignore[attr-defined]
+        cls._bulky = any(hints[f.name] in (np.ndarray, bytes, Any) for f in fields)
         REGISTRY[cls.__name__] = cls
 
 

@@ -8,6 +8,7 @@ Rz(azimuth) Ry(rot y') Rz(rot z'').
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 import numpy as np
 
 
@@ -57,13 +58,13 @@ POINT_AXES: tuple[tuple[str, str], ...] = (
     ("x", "m"), ("y", "m"), ("z", "m"), ("rot(y')", "deg"), ("rot(z'')", "deg"))
 
 
-def user_point(pose: "list[float] | np.ndarray") -> list[float]:
+def user_point(pose: "Sequence[float] | np.ndarray") -> list[float]:
     """A 5-element pose in SI (m, rad) as the user's point (m, deg)."""
     p = [float(v) for v in pose]
     return p[:3] + [math.degrees(p[3]), math.degrees(p[4])]
 
 
-def si_pose(point: "list[float] | np.ndarray") -> list[float]:
+def si_pose(point: "Sequence[float] | np.ndarray") -> list[float]:
     """The user's point (m, deg) as a 5-element pose in SI (m, rad)."""
     p = [float(v) for v in point]
     return p[:3] + [math.radians(p[3]), math.radians(p[4])]

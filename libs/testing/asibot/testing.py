@@ -361,8 +361,10 @@ class Stack:
             return subprocess.run([sys.executable, *args], env=self.env, capture_output=True, text=True,
                                   timeout=timeout, cwd=self.folder)
         except subprocess.TimeoutExpired as exc:
+            # Bytes (or None) despite text=True: run() does not decode what a timeout cut short.
+            printed = "\n".join((out or b"").decode(errors="replace") for out in (exc.stdout, exc.stderr))
             raise AssertionError(f"{args} did not finish within {timeout} s; it printed:\n"
-                                 f"{exc.stdout}\n{exc.stderr}\n--- asibot up:\n{self.log()}") from None
+                                 f"{printed}\n--- asibot up:\n{self.log()}") from None
 
     def stop(self) -> int:
         self.bus.close()

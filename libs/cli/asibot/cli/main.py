@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import logging
 import os
 import signal
@@ -17,6 +18,7 @@ from asibot.safety import estop
 from asibot.cli import nav as navcli
 from asibot.bus import DEFAULT_ROUTER, ROUTER_ENV, Bus, open_router, router_endpoint
 from asibot.errors import AsibotError
+from asibot.messages import Health
 from asibot.safety.estop import who
 from asibot.safety.identity import Identity
 
@@ -102,12 +104,12 @@ def cmd_up(args: argparse.Namespace) -> int:
     sup.say("asibot", f"router {endpoint}; recordings in {recordings}; Ctrl-C stops")
 
     def on_event(name: str, what: str) -> None:
-        spec = next(s for s in services if s.name == name)
-        if what == "started" and spec.url:
+        url = next(s for s in services if s.name == name).url
+        if what == "started" and url:
             def announce() -> None:
-                port = spec.url.rsplit(":", 1)[-1].split("/")[0]
+                port = url.rsplit(":", 1)[-1].split("/")[0]
                 if wait_for_port(f"tcp/127.0.0.1:{port}", 30.0):
-                    sup.say("asibot", f"web: {spec.url}")
+                    sup.say("asibot", f"web: {url}")
             threading.Thread(target=announce, daemon=True).start()
 
     sup.on_event = on_event
@@ -124,9 +126,8 @@ def cmd_status(args: argparse.Namespace) -> int:
         print(exc, file=sys.stderr)
         return 1
     with bus:
-        health: dict[str, dict] = {}
+        health: dict[str, Health] = {}
         if args.health:
-            from asibot.messages import Health
             bus.subscribe(keys.ALL_HEALTH, Health, lambda k, h: health.__setitem__(k, h), with_key=True)
             time.sleep(2.2)
         alive = bus.alive(keys.ALL_SERVICES)
@@ -186,7 +187,7 @@ def cmd_estop(args: argparse.Namespace) -> int:
             estop.latch(bus, robot, me, True, reason, by)
         code = 0
         for robot in robots:
-            engaged = _wait_for(lambda r=robot: _driver_estop(bus, r), 2.0)
+            engaged = _wait_for(functools.partial(_driver_estop, bus, robot), 2.0)
             if engaged:
                 print(f"{robot}: stopped; the emergency stop holds until `asibot release {robot}`")
             else:

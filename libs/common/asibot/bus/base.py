@@ -9,7 +9,6 @@ anything else is a Zenoh router.
 
 from __future__ import annotations
 
-import abc
 import atexit
 import logging
 import threading
@@ -91,22 +90,29 @@ class Publisher(Generic[M]):
         self._raw.close()
 
 
-class Bus(abc.ABC):
+class Bus:
     """One service's connection to the others, with typed helpers.
 
     >>> bus = Bus("kinematics")                      # the router of $ASIBOT_ROUTER
     >>> bus = Bus("test", "mem://kitchen")           # in this process only
     >>> bus.subscribe(keys.arm_state("asibot-sim"), ArmState, on_state)
+
+    A backend overrides every method under "what a backend provides". Bus is no abc.ABC only
+    because `Bus(...)` is the factory too, and a type checker refuses any call of an abstract class.
     """
 
-    def __new__(cls, name: str = "", endpoint: str | None = None, **kwargs: Any) -> "Bus":
+    # The signature every backend's __init__ takes. Bus itself has no __init__ (backends
+    # call `_open`), so that a type checker reads `Bus(...)` from this __new__.
+    def __new__(cls, name: str = "", endpoint: str | None = None, *, wait: float | None = None,
+                stop: threading.Event | None = None) -> Bus:
         if cls is Bus:  # the factory: choose the backend from the endpoint (python-can's Bus)
             from asibot.bus import memory, zenoh_backend
             endpoint = zenoh_backend.router_endpoint(endpoint)
             cls = memory.MemoryBus if endpoint.startswith(MEMORY_SCHEME) else zenoh_backend.ZenohBus
         return super().__new__(cls)
 
-    def __init__(self, name: str, endpoint: str) -> None:
+    def _open(self, name: str, endpoint: str) -> None:
+        """What a backend's __init__ calls first, with the endpoint it resolved."""
         self.name = name
         self.endpoint = endpoint
         self.rejected = 0
@@ -119,48 +125,49 @@ class Bus(abc.ABC):
         _open_buses.add(self)
 
     # ------------------------------------------------------------ what a backend provides
-    @abc.abstractmethod
     def _declare_publisher(self, key: str, express: bool, block: bool) -> RawPublisher:
         """A publisher of bytes on `key`. `express` skips batching; `block` never drops."""
+        raise NotImplementedError
 
-    @abc.abstractmethod
     def _declare_subscriber(self, key: str, deliver: Callable[[str, bytes], None], maxsize: int,
-                            ring: bool, prelude: Prelude | None = None) -> Closable:
+                            prelude: Prelude | None = None) -> Closable:
         """Call deliver(key, payload) on a bus-owned thread, in order, for each sample on `key`,
         after delivering the (key, payload) pairs `prelude()` returns on that same thread.
-        A full queue of `maxsize` pushes back on the sender, or drops the oldest when `ring`."""
+        At most `maxsize` samples wait; when full, the oldest waiting one is dropped. A slow
+        subscription never holds up the sender or the bus's other traffic."""
+        raise NotImplementedError
 
-    @abc.abstractmethod
     def _declare_queryable(self, key: str, answer: Answer, workers: int) -> Closable:
         """Answer queries on `key` with `answer(query_key, payload)` on `workers` threads."""
+        raise NotImplementedError
 
-    @abc.abstractmethod
     def _get(self, key: str, payload: bytes, timeout: float) -> list[tuple[str, bytes] | None]:
         """Every answer to a query on `key` within `timeout`; None stands for an error answer."""
+        raise NotImplementedError
 
-    @abc.abstractmethod
     def _put(self, key: str, payload: bytes) -> None:
         """Publish bytes once, without declaring a publisher."""
+        raise NotImplementedError
 
-    @abc.abstractmethod
     def _wait_for_queryable(self, key: str, timeout: float) -> bool:
         """Wait until some queryable matches `key`; False if none does within `timeout`."""
+        raise NotImplementedError
 
-    @abc.abstractmethod
     def _declare_token(self, key: str) -> Closable:
         """A liveliness token: it vanishes when closed or when this process dies."""
+        raise NotImplementedError
 
-    @abc.abstractmethod
     def _watch_tokens(self, pattern: str, on_change: Callable[[str, bool], None]) -> Closable:
         """on_change(key, alive) on a bus-owned thread; the tokens alive now come first."""
+        raise NotImplementedError
 
-    @abc.abstractmethod
     def _tokens(self, pattern: str, timeout: float) -> list[str]:
         """The keys of the liveliness tokens matching `pattern` now."""
+        raise NotImplementedError
 
-    @abc.abstractmethod
     def _close_transport(self) -> None:
         """Close the connection itself, after every declaration was closed."""
+        raise NotImplementedError
 
     def refusal(self, message: str, key: str) -> str | None:
         """Why the router would refuse this session `message` on `key`; None when it may.
@@ -195,22 +202,23 @@ class Bus(abc.ABC):
     # ------------------------------------------------------------ pub/sub
     def publisher(self, key: str, msg_type: type[M], *, express: bool = False,
                   block: bool = False) -> Publisher[M]:
-        """`express` skips batching (commands); `block` never drops (recordings, benchmarks)."""
+        """`express` skips batching (commands); `block` waits for the network rather than drop
+        (recordings, benchmarks). A subscriber too slow for the stream still drops its oldest."""
         self._warn_if_refused(key)
         return self._keep(Publisher(self._declare_publisher(key, express, block), key, msg_type))
 
-    def subscribe(self, key: str, msg_type: type[M], callback: Callable[..., None], *,
+    def subscribe(self, key: str, msg_type: type[M], callback: Callable[..., object], *,
                   latest: bool = False, with_key: bool = False, maxsize: int = 0,
-                  ring: bool = False,
                   on_reject: Callable[[str, MessageError], None] | None = None) -> Closable:
         """Call `callback(msg)` (or `callback(key, msg)`) on a worker thread for every valid message.
 
         Invalid messages are counted, logged (once a second) and dropped; `on_reject(key,
         error)` is called too, for services that must answer bad input (a driver sends an
         Event). `latest=True` first delivers the current latched values (`latch`), so a late
-        joiner learns the estop state at once. `ring=True` keeps only the newest `maxsize`
-        samples when the callback is slower than the stream (cameras); otherwise a full queue
-        pushes back on the sender.
+        joiner learns the estop state at once. At most `maxsize` (default 1024) messages wait
+        for the callback: when it is slower than the stream the oldest waiting one is dropped,
+        and nothing else waits for it (not the sender, not the bus's other subscriptions, not
+        its calls). `maxsize=1` keeps only the newest (cameras, scans).
         """
 
         def deliver(k: str, payload: bytes) -> None:
@@ -224,13 +232,13 @@ class Bus(abc.ABC):
             callback(k, msg) if with_key else callback(msg)
 
         prelude = (lambda: self._newest_latched(key)) if latest else None
-        return self._keep(self._declare_subscriber(key, deliver, maxsize, ring, prelude))
+        return self._keep(self._declare_subscriber(key, deliver, maxsize, prelude))
 
     def subscribe_raw(self, key: str, callback: Callable[[str, bytes, int], None], *,
-                      maxsize: int = 0, ring: bool = False) -> Closable:
+                      maxsize: int = 0) -> Closable:
         """Untyped: callback(key, payload, receive_time_ns). For the recorder and tools."""
         return self._keep(self._declare_subscriber(
-            key, lambda k, p: callback(k, p, time.time_ns()), maxsize, ring))
+            key, lambda k, p: callback(k, p, time.time_ns()), maxsize))
 
     def put_raw(self, key: str, payload: bytes) -> None:
         self._warn_if_refused(key)

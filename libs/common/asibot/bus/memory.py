@@ -2,7 +2,7 @@
 
 Every bus opened on the same `mem://NAME` in one process shares one `Network`, with Zenoh's
 semantics where services rely on them: key expressions with `*` and `**` on both sides,
-per-subscription queues that push back (or drop the oldest, for rings), queries answered by
+per-subscription queues that drop their oldest when full (never wait), queries answered by
 every matching queryable with a timeout, liveliness tokens that appear and vanish with their
 bus, and latched values. Unit tests of a service run on it with no router and no sockets;
 multi-process tests keep the real router.
@@ -46,36 +46,35 @@ def intersects(a: str, b: str) -> bool:
 
 
 class Channel:
-    """A bounded queue: `put` waits for room (or drops the oldest item when `ring`),
-    `recv` waits for an item and raises EOFError once closed and empty."""
+    """What a subscription or a server received and has not handled yet: `maxsize` at most.
 
-    def __init__(self, maxsize: int = 1024, ring: bool = False) -> None:
+    `push` never waits, as Zenoh's RingChannel: when full, the oldest item is dropped (and
+    `on_drop(item)` told). `pop` waits for an item and raises EOFError once closed and empty."""
+
+    def __init__(self, maxsize: int = 1024, on_drop: Callable[[Any], None] | None = None) -> None:
         self._items: collections.deque = collections.deque()
         self._maxsize = maxsize or 1024
-        self._ring = ring
+        self._on_drop = on_drop
         self._cond = threading.Condition()
         self._closed = False
 
-    def put(self, item: Any) -> None:
+    def push(self, item: Any) -> None:
         with self._cond:
-            while not self._ring and len(self._items) >= self._maxsize and not self._closed:
-                self._cond.wait()
             if self._closed:
                 return
-            if len(self._items) >= self._maxsize:
-                self._items.popleft()
+            oldest = self._items.popleft() if len(self._items) >= self._maxsize else None
             self._items.append(item)
-            self._cond.notify_all()
+            self._cond.notify()
+        if oldest is not None and self._on_drop is not None:
+            self._on_drop(oldest)
 
-    def recv(self) -> Any:
+    def pop(self) -> Any:
         with self._cond:
             while not self._items:
                 if self._closed:
                     raise EOFError("channel closed")
                 self._cond.wait()
-            item = self._items.popleft()
-            self._cond.notify_all()
-            return item
+            return self._items.popleft()
 
     def close(self) -> None:
         with self._cond:
@@ -119,14 +118,14 @@ class Network:
         with self.lock:
             targets = [ch for expr, ch in self.subscribers.values() if intersects(expr, key)]
         for ch in targets:
-            ch.put((key, payload))
+            ch.push((key, payload))
 
     def query(self, key: str, payload: bytes, timeout: float) -> list[tuple[str, bytes] | None]:
         with self.lock:
             targets = [ch for expr, ch in self.queryables.values() if intersects(expr, key)]
         query = _Query(key, payload, len(targets))
         for ch in targets:
-            ch.put(query)
+            ch.push(query)
         return query.wait(timeout) if targets else []
 
     def set_token(self, ident: int, key: str | None) -> None:
@@ -139,7 +138,7 @@ class Network:
                 alive = True
             watchers = [ch for expr, ch in self.watchers.values() if key and intersects(expr, key)]
         for ch in watchers:
-            ch.put((key, alive))
+            ch.push((key, alive))
 
 
 def network(name: str) -> Network:
@@ -194,7 +193,7 @@ class MemoryBus(Bus):
                 endpoint = MEMORY_SCHEME + "default"
         if not endpoint.startswith(MEMORY_SCHEME) or not endpoint[len(MEMORY_SCHEME):]:
             raise ValueError(f"a memory bus endpoint looks like mem://NAME, not {endpoint!r}")
-        super().__init__(name, endpoint)
+        self._open(name, endpoint)
         self.network = network(endpoint[len(MEMORY_SCHEME):])
 
     def _declare(self, table: dict, key: str, channel: Channel) -> _Declared:
@@ -207,14 +206,16 @@ class MemoryBus(Bus):
         return _Publisher(self.network, key)
 
     def _declare_subscriber(self, key: str, deliver: Callable[[str, bytes], None], maxsize: int,
-                            ring: bool, prelude: Prelude | None = None) -> Drain:
-        channel = Channel(maxsize, ring)
+                            prelude: Prelude | None = None) -> Drain:
+        channel = Channel(maxsize)
         declared = self._declare(self.network.subscribers, key, channel)
-        return Drain(f"{self.name}-sub", channel.recv, lambda item: deliver(*item), declared.close,
+        return Drain(f"{self.name}-sub", channel.pop, lambda item: deliver(*item), declared.close,
                      prelude=prelude)
 
     def _declare_queryable(self, key: str, answer: Answer, workers: int) -> Drain:
-        channel = Channel(256)
+        # A query dropped unanswered (256 waiting) is finished at once, as Zenoh finalises a
+        # dropped query: its caller hears "no answer" rather than waiting for its whole timeout.
+        channel = Channel(256, lambda query: query.finish(None, False))
 
         def run(query: _Query) -> None:
             result, answered = None, False
@@ -225,7 +226,7 @@ class MemoryBus(Bus):
                 query.finish(result, answered)  # finalise, whatever happened
 
         declared = self._declare(self.network.queryables, key, channel)
-        return Drain(f"{self.name}-rpc", channel.recv, run, declared.close, workers)
+        return Drain(f"{self.name}-rpc", channel.pop, run, declared.close, workers)
 
     def _get(self, key: str, payload: bytes, timeout: float) -> list[tuple[str, bytes] | None]:
         return self.network.query(key, payload, timeout)
@@ -247,15 +248,15 @@ class MemoryBus(Bus):
         return _Token(self.network, key)
 
     def _watch_tokens(self, pattern: str, on_change: Callable[[str, bool], None]) -> Drain:
-        channel = Channel(1024)
+        channel = Channel(1 << 16)
         with self.network.lock:  # history first, then changes: no token slips between
             for key in self.network.tokens.values():
                 if intersects(pattern, key):
-                    channel.put((key, True))
+                    channel.push((key, True))
             ident = next(_ids)
             self.network.watchers[ident] = (pattern, channel)
         declared = _Declared(self.network.watchers, ident, channel, self.network.lock)
-        return Drain(f"{self.name}-watch", channel.recv, lambda item: on_change(*item), declared.close)
+        return Drain(f"{self.name}-watch", channel.pop, lambda item: on_change(*item), declared.close)
 
     def _tokens(self, pattern: str, timeout: float) -> list[str]:
         with self.network.lock:

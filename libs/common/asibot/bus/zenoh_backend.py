@@ -156,7 +156,8 @@ class _Publisher:
         self._pub.put(payload)
 
     def matching(self) -> bool:
-        return self._pub.matching_status.matching
+        # zenoh's stub says bool; the property returns a zenoh.MatchingStatus (eclipse-zenoh 1.x).
+        return self._pub.matching_status.matching  # type: ignore[attr-defined]
 
     def close(self) -> None:
         self._pub.undeclare()
@@ -176,6 +177,13 @@ def _drain(name: str, declared: Any, handle: Callable[[Any], None], workers: int
     # borrow that makes `undeclare()` fail, while undeclaring closes the handler's channel
     # and wakes a blocked `handler.recv()` at once, so close() is immediate.
     return Drain(name, declared.handler.recv, handle, declared.undeclare, workers, prelude)
+
+
+def _ring(size: int) -> zenoh.handlers.RingChannel[Any]:
+    """Every channel of the bus is a ring: when full it drops its oldest item, so Zenoh's
+    receiving thread never waits. (A full FifoChannel made it wait, and with it every
+    subscription and every reply of the session: tests/common/test_bus_slow_subscriber.py.)"""
+    return zenoh.handlers.RingChannel(size)
 
 
 @functools.cache
@@ -206,7 +214,7 @@ class ZenohBus(Bus):
     def __init__(self, name: str, endpoint: str | None = None, *, wait: float | None = None,
                  stop: threading.Event | None = None) -> None:
         _steady_malloc()
-        super().__init__(name, router_endpoint(endpoint))
+        self._open(name, router_endpoint(endpoint))
         self.session = open_client(self.endpoint, wait=wait, stop=stop, name=name)
         self._refusals: dict[tuple[str, str], str | None] = {}
 
@@ -223,17 +231,14 @@ class ZenohBus(Bus):
         return _Publisher(self.session.declare_publisher(key, express=express, congestion_control=cc))
 
     def _declare_subscriber(self, key: str, deliver: Callable[[str, bytes], None], maxsize: int,
-                            ring: bool, prelude: Prelude | None = None) -> Drain:
-        size = maxsize or 1024
-        channel = zenoh.handlers.RingChannel(size) if ring else zenoh.handlers.FifoChannel(size)
-
+                            prelude: Prelude | None = None) -> Drain:
         def handle(item: Any) -> None:
             if isinstance(item, tuple):  # from the prelude
                 deliver(*item)
             else:
                 deliver(str(item.key_expr), item.payload.to_bytes())
 
-        return _drain(f"{self.name}-sub", self.session.declare_subscriber(key, channel), handle,
+        return _drain(f"{self.name}-sub", self.session.declare_subscriber(key, _ring(maxsize or 1024)), handle,
                       prelude=prelude)
 
     def _declare_queryable(self, key: str, answer: Answer, workers: int) -> Drain:
@@ -246,8 +251,8 @@ class ZenohBus(Bus):
             finally:
                 query.drop()  # finalise: otherwise the caller waits for its full timeout
 
-        queryable = self.session.declare_queryable(key, zenoh.handlers.FifoChannel(256))
-        return _drain(f"{self.name}-rpc", queryable, run, workers)
+        # A query the ring drops (256 waiting) is finalised by Zenoh: its caller hears "no answer".
+        return _drain(f"{self.name}-rpc", self.session.declare_queryable(key, _ring(256)), run, workers)
 
     def _get(self, key: str, payload: bytes, timeout: float) -> list[tuple[str, bytes] | None]:
         # No consolidation: several latches on one key must all answer so the newest wins.
@@ -263,7 +268,8 @@ class ZenohBus(Bus):
         querier = self.session.declare_querier(key)
         try:
             deadline = time.monotonic() + timeout
-            while not querier.matching_status.matching:
+            # zenoh's stub says bool; the property returns a zenoh.MatchingStatus (eclipse-zenoh 1.x).
+            while not querier.matching_status.matching:  # type: ignore[attr-defined]
                 if time.monotonic() > deadline:
                     return False
                 time.sleep(0.005)
@@ -275,8 +281,7 @@ class ZenohBus(Bus):
         return _Token(self.session.liveliness().declare_token(key))
 
     def _watch_tokens(self, pattern: str, on_change: Callable[[str, bool], None]) -> Drain:
-        sub = self.session.liveliness().declare_subscriber(
-            pattern, zenoh.handlers.FifoChannel(1024), history=True)
+        sub = self.session.liveliness().declare_subscriber(pattern, _ring(1 << 16), history=True)
         return _drain(f"{self.name}-watch", sub,
                       lambda s: on_change(str(s.key_expr), s.kind == zenoh.SampleKind.PUT))
 

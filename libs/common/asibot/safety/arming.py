@@ -89,4 +89,4 @@ class Arming:
             if now - t >= self.watchdog:
                 del self._last[sender]
         while len(self._last) >= MAX_SENDERS:  # all recent: drop the oldest, it counts as new
-            del self._last[min(self._last, key=self._last.get)]
+            del self._last[min(self._last, key=self._last.__getitem__)]

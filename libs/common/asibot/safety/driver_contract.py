@@ -21,9 +21,10 @@ driver, then `serve`s what the driver obeys, as `command(name, obey, heard)`s.
 
 from __future__ import annotations
 
+import functools
 import logging
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Mapping
 
 from asibot.safety import estop
 from asibot import keys
@@ -98,7 +99,7 @@ class DriverContract:
               on_holder: Callable[[str, str | None], None],
               on_estop: Callable[[bool, str, str], None],
               status: Callable[[], dict], reset_fault: Callable[[], dict],
-              verbs: dict[str, Callable[[dict], dict]] | None = None) -> None:
+              verbs: Mapping[str, Callable[[dict], dict]] | None = None) -> None:
         """Obey `commands` from their holders; `on_holder(part, id)` hears each change of a
         part's holder, `on_estop(engaged, reason, by)` each newer estop state; `status()` is the
         driver's own status, `reset_fault()` clears a fault (raising RpcError with the sentence
@@ -107,7 +108,7 @@ class DriverContract:
         self.commands = list(commands)
         self._status = status
         parts = sorted({c.kind.part for c in self.commands}, key=("arm", "base").index)
-        self.holders = {part: Holder(robot, part, on_change=lambda h, part=part: on_holder(part, h))
+        self.holders = {part: Holder(robot, part, on_change=functools.partial(on_holder, part))
                         for part in parts}
         for holder in self.holders.values():
             holder.follow(bus)

@@ -26,14 +26,19 @@ import dataclasses
 import functools
 import itertools
 import threading
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from nacl.exceptions import BadSignatureError, CryptoError
 from nacl.signing import SigningKey, VerifyKey
 
 from asibot import messages
 
-T = TypeVar("T")
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
+# Not bound to messages.Message: mypy would then check replace()'s fields against Message's
+# (`stamp` only), while every signed message has `seq` and `signature` of its own.
+T = TypeVar("T", bound="DataclassInstance")
 
 #: Length of the public key in an id: base32 of 32 bytes, lower case, without padding.
 KEY_CHARS = 52

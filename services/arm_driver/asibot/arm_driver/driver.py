@@ -58,7 +58,7 @@ class ArmDriver:
         self.estop = False
         self._estop_reason = ""
         self.arming = Arming()          # a driver starts armed (asibot.safety.arming says why)
-        self._reset_request: tuple[threading.Event, list] | None = None
+        self._reset_request: tuple[threading.Event, list[dict | Exception]] | None = None
         self._feedback: dict[int, Feedback] = {}
         self.counters = {"cycles": 0, "rejected_commands": 0, "ignored_commands": 0, "not_ready": 0, "faults": 0,
                          "tx_errors": 0}
@@ -175,7 +175,8 @@ class ArmDriver:
 
         Runs on the control thread; raises FaultError with a sentence when it cannot.
         """
-        done, result = threading.Event(), []
+        done = threading.Event()
+        result: list[dict | Exception] = []
         with self._lock:
             if self._reset_request is not None:
                 raise FaultError("A fault reset is already running; wait for it to finish.")
@@ -194,7 +195,7 @@ class ArmDriver:
                 "joint": j.name, "node": j.node,
                 "state": fb[j.node].state.value if j.node in fb else "unknown",
                 "nmt": fb[j.node].nmt_state if j.node in fb else None,
-                "mode": MODE_NAMES.get(self.master.modes.get(j.node), "not configured"),
+                "mode": self._mode_name(j.node),
             } for j in self.joints]
             return {
                 "names": self.config.names,
@@ -392,6 +393,10 @@ class ArmDriver:
         self.on_event("info", "fault_reset", "The fault was reset: the drives are enabled and hold their position.")
         self.on_event("info", "ready", ready)
         return {"reinitialised": [self._name(n) for n in lost]}
+
+    def _mode_name(self, node: int) -> str:
+        mode = self.master.modes.get(node)
+        return "not configured" if mode is None else MODE_NAMES.get(mode, "not configured")
 
     def _name(self, node: int) -> str:
         return next(j.name for j in self.joints if j.node == node)

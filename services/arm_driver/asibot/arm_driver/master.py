@@ -11,10 +11,12 @@ NMT start, then shutdown -> switch on -> enable operation.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import can
@@ -68,12 +70,13 @@ def _bus_time(ts: float | None) -> float:
 
 
 class _ErrorFrames(can.Listener):
-    def __init__(self, on_error: callable) -> None:
-        self.on_error = on_error
+    def __init__(self, on_error_class: Callable[[int], None]) -> None:
+        # Not `on_error`: can.Listener.on_error(exc) is the notifier's hook for a failing reader.
+        self.on_error_class = on_error_class
 
     def on_message_received(self, msg: can.Message) -> None:
         if msg.is_error_frame:
-            self.on_error(msg.arbitration_id)
+            self.on_error_class(msg.arbitration_id)
 
 
 class CanopenMaster:
@@ -84,7 +87,8 @@ class CanopenMaster:
         self.bus = bus
         self.network = canopen.Network(bus)
         self.network.NOTIFIER_CYCLE = 0.1   # the reader notices a stop within 0.1 s (default 1 s)
-        self.network.listeners.append(_ErrorFrames(self._on_error_frame))
+        # canopen types Network.listeners as list[MessageListener]; can.Notifier takes any can.Listener.
+        self.network.listeners.append(_ErrorFrames(self._on_error_frame))  # type: ignore[arg-type]
         self._lock = threading.Lock()
         self._changed = threading.Condition(self._lock)
         self.feedback: dict[int, Feedback] = {j.node: Feedback() for j in config.joints}
@@ -101,16 +105,15 @@ class CanopenMaster:
         for j in config.joints:
             node = self.network.add_node(canopen.RemoteNode(j.node, ObjectDictionary()))
             node.sdo.RESPONSE_TIMEOUT = config.sdo_timeout_s
-            node.emcy.add_callback(lambda e, n=j.node: self._on_emcy(n, e))
+            node.emcy.add_callback(functools.partial(self._on_emcy, j.node))
             self.network.subscribe(0x700 + j.node, self._on_heartbeat)
             for layout in config.pdos.values():
                 if layout.kind == "tpdo":
-                    self.network.subscribe(layout.cob_id(j.node),
-                                           lambda cob, data, ts, n=j.node, lay=layout: self._on_tpdo(n, lay, data, ts))
+                    self.network.subscribe(layout.cob_id(j.node), functools.partial(self._on_tpdo, j.node, layout))
         self.network.connect()
 
     # ------------------------------------------------------------ receive side (notifier thread)
-    def _on_tpdo(self, node: int, layout: Layout, data: bytes, ts: float) -> None:
+    def _on_tpdo(self, node: int, layout: Layout, cob_id: int, data: bytearray, ts: float) -> None:
         try:
             values = layout.decode(bytes(data))
         except ValueError as exc:
@@ -142,7 +145,7 @@ class CanopenMaster:
                 fb.der = values[objects.DETAILED_ERROR]
             self._changed.notify_all()
 
-    def _on_heartbeat(self, cob_id: int, data: bytes, ts: float) -> None:
+    def _on_heartbeat(self, cob_id: int, data: bytearray, ts: float) -> None:
         if len(data) < 1:
             return
         node, state = cob_id - 0x700, data[0] & 0x7F
@@ -156,7 +159,7 @@ class CanopenMaster:
                 fb.booted = True
             self._changed.notify_all()
 
-    def _on_absolute(self, cob_id: int, data: bytes, ts: float) -> None:
+    def _on_absolute(self, cob_id: int, data: bytearray, ts: float) -> None:
         with self._changed:
             self._absolute[cob_id - cui.REPLY_POLL] = bytes(data)
             self._changed.notify_all()
@@ -290,6 +293,8 @@ class CanopenMaster:
     def read_absolute(self, joint: Joint) -> float:
         """The joint's angle (rad) from its absolute encoder, polled as CuiAbsolute does."""
         enc = joint.absolute
+        if enc is None:
+            raise ValueError(f"joint {joint.name} has no absolute encoder")
         why = "no answer"
         for _ in range(cui.RETRIES):
             with self._lock:

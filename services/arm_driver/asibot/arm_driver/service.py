@@ -54,7 +54,8 @@ class ArmDriverService(Service):
         self.contract = DriverContract(bus, robot)
         self.driver = ArmDriver(CanopenMaster(can_bus, self.config), self.config,
                                 on_state=self._state.put, on_event=self.contract.event)
-        verbs = {"inject_fault": self._inject_fault} if self.emulator is not None else {}
+        verbs = (
+            {"inject_fault": self._inject_fault} if self.emulator is not None else {})
         self.contract.serve(
             [command("arm", self._obey, self.driver.heard)],
             on_holder=lambda part, holder: self.driver.set_controller(holder), on_estop=self.driver.set_estop,
@@ -83,6 +84,8 @@ class ArmDriverService(Service):
         if fault not in FAULTS:
             raise RpcError("bad_request", f"fault must be one of {', '.join(FAULTS)}")
         emu = self.emulator
+        if emu is None:     # the verb is served only on the emulated bus
+            raise RpcError("unavailable", "Faults can be injected only on the emulated CAN bus (--can emulated).")
         if fault == "clear":
             emu.clear()
             return {}

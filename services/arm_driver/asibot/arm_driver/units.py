@@ -28,7 +28,7 @@ class Units:
     def to_counts(self, rad: float) -> int:
         return int(round(rad * self.counts_per_rad))
 
-    def to_rad(self, counts: int) -> float:
+    def to_rad(self, counts: float) -> float:
         return counts / self.counts_per_rad
 
     def velocity_iu(self, rad_s: float) -> int:

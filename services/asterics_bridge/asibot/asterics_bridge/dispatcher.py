@@ -104,7 +104,7 @@ class Dispatcher:
         self._arm_saved: dict[str, list[float]] = {}
         self.counters = {"commands": 0, "ok": 0, "refused": 0, "not_understood": 0, "stops_on_disconnect": 0,
                          "stops_on_longest": 0}
-        self.board = StatusBoard(bus, self._on_notice, clock=time.time_ns)
+        self.board = StatusBoard(bus, self._on_notice)
 
     # ------------------------------------------------------------------ sessions
     def open_session(self, peer: str) -> Session:
@@ -432,9 +432,7 @@ class Dispatcher:
             return False
 
     def expire(self) -> None:
-        """Stop continuous motions older than `longest` s, and keep the status board
-        following the robots (call it a few times a second)."""
-        self.board.check()
+        """Stop continuous motions older than `longest` s (call it a few times a second)."""
         now = self.clock()
         with self._lock:
             due = {r: mo for r, mo in self._motions.items()
@@ -455,8 +453,7 @@ class Dispatcher:
                 self._send_stop(robot, motion, "stops_on_disconnect")
 
     def health(self) -> dict:
-        return {**self.counters, "clients": self.sessions(), "moving": sorted(self._motions),
-                "resubscribed": self.board.resubscribed}
+        return {**self.counters, "clients": self.sessions(), "moving": sorted(self._motions)}
 
 
 def parse_events(text: str) -> dict[int, str]:

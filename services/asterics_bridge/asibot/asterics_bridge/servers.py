@@ -247,8 +247,9 @@ class Servers:
         if self.limits.sndbuf and sock is not None:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, self.limits.sndbuf)
         handler = asyncio.current_task()
-        self._handlers.add(handler)
-        handler.add_done_callback(self._handlers.discard)
+        if handler is not None:      # always: asyncio's servers run each connection as a task
+            self._handlers.add(handler)
+            handler.add_done_callback(self._handlers.discard)
         refusal = self._slot_refusal(address)
         if refusal is not None:
             await self._refuse(reader, writer, peer, refusal)
@@ -256,7 +257,11 @@ class Servers:
         self.counters["connections"] += 1
         session = self.dispatcher.open_session(peer)
         client = _Client(self, writer, session, address)
-        session.notify = lambda n: self._loop.call_soon_threadsafe(client.notice, n)
+
+        def notify(notice: Notice) -> None:
+            self._loop.call_soon_threadsafe(client.notice, notice)
+
+        session.notify = notify
         self._clients.add(client)
         worker = asyncio.ensure_future(self._work(client))
         try:
@@ -428,7 +433,8 @@ class Servers:
             return
         assert isinstance(item, nc.Frame)
         if item.kind == nc.STRING:
-            self._command(client, item.value)
+            if isinstance(item.value, str):      # always, for a string frame
+                self._command(client, item.value)
         elif item.kind == nc.EVENT:
             command = self.events.get(item.port)
             if command is None:
@@ -468,8 +474,9 @@ class Servers:
     # ------------------------------------------------------------------ HTTP
     async def _serve_http(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         handler = asyncio.current_task()
-        self._handlers.add(handler)
-        handler.add_done_callback(self._handlers.discard)
+        if handler is not None:      # always: asyncio's servers run each connection as a task
+            self._handlers.add(handler)
+            handler.add_done_callback(self._handlers.discard)
         self._http_writers.add(writer)
         try:
             for _ in range(self.limits.http_requests):

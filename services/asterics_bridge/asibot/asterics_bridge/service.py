@@ -148,10 +148,14 @@ def allowed_hosts(args: argparse.Namespace, host: str) -> list[str]:
     if host in WILDCARDS and not args.host:
         return names          # a container's 0.0.0.0, published on the host's loopback only
     machine = socket.gethostname()
+    addresses: set[str] = set()
     try:
-        addresses = {info[4][0] for info in socket.getaddrinfo(machine, None)}
+        for *_, sockaddr in socket.getaddrinfo(machine, None):
+            address = sockaddr[0]
+            if isinstance(address, str):     # always, for IPv4 and IPv6
+                addresses.add(address)
     except OSError:
-        addresses = set()
+        pass
     return [machine, f"{machine}.local", *sorted(addresses), *names]
 
 

@@ -73,7 +73,6 @@ def notice_of(robot: str, event: m.Event) -> Notice:
 @dataclass
 class RobotStatus:
     nav: m.NavStatus | None = None
-    nav_at: int = 0                      # our clock (ns) when `nav` came
     odom: m.Odometry | None = None
     where: m.NavPose | None = None       # nav's pose on the map; the pose people mean
     battery: float | None = None
@@ -107,73 +106,25 @@ class RobotStatus:
         }
 
 
-#: nav publishes its status at least 4 times a second; this long without one, while nav runs,
-#: means the bridge's subscriptions stopped delivering (ns).
-STALE_NS = 3_000_000_000
-#: At most one re-subscription this often (ns).
-RESUBSCRIBE_EVERY_NS = 10_000_000_000
-
-
 class StatusBoard:
     """Subscribes for every robot; calls `on_notice(notice)` on the bus's threads."""
 
-    def __init__(self, bus: Bus, on_notice: Callable[[Notice], None], clock: Callable[[], int]) -> None:
+    def __init__(self, bus: Bus, on_notice: Callable[[Notice], None]) -> None:
         self._lock = threading.Lock()
         self._robots: dict[str, RobotStatus] = {}
         self.on_notice = on_notice
-        self.clock = clock
         self.bus = bus
-        self.resubscribed = 0
-        self._resubscribed_at = -RESUBSCRIBE_EVERY_NS
-        self._subscriptions: list = []
-        self._subscribe()
-
-    def _subscribe(self) -> None:
-        bus = self.bus
         self._subscriptions = [
             bus.subscribe(keys.every_robot(keys.events), m.Event, self._on_event, with_key=True, maxsize=200),
             bus.subscribe(keys.every_robot(keys.nav_status), m.NavStatus, self._on_nav, with_key=True, maxsize=50),
             bus.subscribe(keys.every_robot(keys.base_odom), m.Odometry, self._on_odom, with_key=True,
-                          maxsize=1, ring=True),
+                          maxsize=1),
             bus.subscribe(keys.every_robot(keys.nav_pose), m.NavPose, self._on_pose, with_key=True,
-                          maxsize=1, ring=True),
+                          maxsize=1),
             bus.subscribe(keys.every_robot(keys.base_battery), m.Battery, self._on_battery, with_key=True,
-                          maxsize=1, ring=True),
+                          maxsize=1),
             bus.subscribe(keys.every_robot(keys.estop), m.EStop, self._on_estop, with_key=True),
         ]
-
-    def check(self) -> bool:
-        """Re-subscribe when nav's status stopped coming while nav runs; True when it did.
-
-        In CI the bridge's subscriptions once all went quiet at the start of a trip (status,
-        pose, events) while its calls to nav were still answered; the cause is not known yet.
-        A user must not be told "driving" forever: a fresh subscription delivers again, and
-        the log says which of the old ones still had a thread pulling from its channel.
-        """
-        now = self.clock()
-        with self._lock:
-            quiet = [r for r, st in self._robots.items() if st.nav is not None and now - st.nav_at > STALE_NS]
-        if not quiet or now - self._resubscribed_at < RESUBSCRIBE_EVERY_NS:
-            return False
-        running = set(self.bus.alive(keys.ALL_SERVICES))
-        stale = [r for r in quiet if keys.service("nav", r) in running]
-        if not stale:
-            return False       # nav stopped: its silence is the news, not a fault of ours
-        self._resubscribed_at = now
-        self.resubscribed += 1
-        with self._lock:
-            ages = {r: (now - self._robots[r].nav_at) / 1e9 for r in stale}
-        pulling = [getattr(sub, "running", None) for sub in self._subscriptions]
-        log.warning("no nav status from %s for %s s while nav runs; subscribing again (threads still "
-                    "pulling: %s)", ", ".join(stale), ", ".join(f"{a:.1f}" for a in ages.values()), pulling)
-        old, self._subscriptions = self._subscriptions, []
-        for sub in old:
-            try:
-                sub.close()
-            except Exception:
-                log.exception("closing a quiet subscription failed")
-        self._subscribe()
-        return True
 
     def robot(self, robot: str) -> RobotStatus:
         with self._lock:
@@ -204,7 +155,7 @@ class StatusBoard:
         self.on_notice(notice)
 
     def _on_nav(self, key: str, status: m.NavStatus) -> None:
-        self._update(key, nav=status, nav_at=self.clock())
+        self._update(key, nav=status)
 
     def _on_odom(self, key: str, odom: m.Odometry) -> None:
         self._update(key, odom=odom)

@@ -124,7 +124,8 @@ class ArcosClient:
     def _sync(self) -> Identity | None:
         for step in (Cmd.SYNC0, Cmd.SYNC1):
             self.send(codec.command(step))
-            if self._await(lambda p, s=step: p == bytes([s]), SYNC_REPLY_TIMEOUT) is None:
+            echo = bytes([step])
+            if self._await(lambda p: p == echo, SYNC_REPLY_TIMEOUT) is None:  # _await calls it before the next step
                 return None
         self.send(codec.command(Cmd.SYNC2))
         reply = self._await(lambda p: p[:1] == b"\x02" and len(p) > 1, SYNC_REPLY_TIMEOUT)

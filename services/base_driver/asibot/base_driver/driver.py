@@ -186,8 +186,7 @@ class BaseDriver:
         was moving, and re-arm for the new holder, if any."""
         with self._lock:
             client = self._client
-            moving = client is not None and client.desired != (0, 0)
-            if moving:
+            if client is not None and client.desired != (0, 0):
                 self._guarded(lambda: client.set_velocity(0, 0))
                 self._on_event("warning", "controller_lost",
                                "The controller of the base changed or disappeared while the base was moving: "
@@ -268,6 +267,9 @@ class BaseDriver:
         client = ArcosClient(link, self.forced_params, on_write=self._on_write)
         try:
             ident = client.connect()
+            params = client.params
+            if params is None:      # connect() sets them: the forced ones, or those of the SYNC2 reply
+                raise ArcosError("the handshake left the robot's parameters unknown")
         except (*LinkError, ArcosError) as exc:
             try:
                 link.close()
@@ -277,7 +279,7 @@ class BaseDriver:
             return False
         with self._lock:
             self._client = client
-            self._tracker = StateTracker(client.params)
+            self._tracker = StateTracker(params)
             self._last_sip = time.monotonic()
             self.watchdog.last = -math.inf      # nothing heard on this line yet
             self._notices.reset()
@@ -287,7 +289,7 @@ class BaseDriver:
             # The line is (back) up: a stream sent while it was down must not drive on.
             self.arming.disarm(f"the Pioneer {'re' if self.counters['reconnects'] else ''}connected on {self.port}")
         log.info("connected to %s (%s %s) on %s, params %s", ident.name, ident.klass,
-                 ident.subclass, self.port, client.params.subclass)
+                 ident.subclass, self.port, params.subclass)
         self._on_event("info", "connected",
                        f"Connected to the Pioneer {ident.name!r} ({ident.subclass}) on {self.port}.")
         self._on_event("info", "ready", self.arming.ready_text("The base"))

@@ -293,46 +293,49 @@ class Controller:
             return self.tick(now)
         dt = 0.0 if self._last_tick is None else now - self._last_tick
         self._last_tick = now
+        hold, pose = self._hold, self._stream_pose
+        if hold is None or pose is None:
+            raise RuntimeError("a stream state without its start: stream() sets both before entering one")
         if self.state == MOVJV:
-            return self._joint_stream_tick(dt)
-        target = self._stream_pose + self._stream_vel * dt
-        q = self._solve(target)
+            return self._joint_stream_tick(hold, dt)
+        target = pose + self._stream_vel * dt
+        q = self._solve(target, hold)
         if q is None:
-            return self._stream_refused()
-        qdot = (q - self._hold) / dt if dt > 0 else np.zeros(self.n)
+            return self._stream_refused(hold)
+        qdot = (q - hold) / dt if dt > 0 else np.zeros(self.n)
         over = float(np.max(np.abs(qdot) / self.vmax))
         if over > 1.0:  # near a singularity: slow the stream down instead of exceeding joint speeds
-            target = self._stream_pose + self._stream_vel * dt / (over * 1.05)
-            q = self._solve(target)
+            target = pose + self._stream_vel * dt / (over * 1.05)
+            q = self._solve(target, hold)
             if q is None:
-                return self._stream_refused()
-            qdot = (q - self._hold) / dt
+                return self._stream_refused(hold)
+            qdot = (q - hold) / dt
             if np.any(np.abs(qdot) > self.vmax):
-                return self._stream_refused()
+                return self._stream_refused(hold)
         self._stream_pose, self._hold = target, q
         return Reference(q.tolist(), qdot.tolist())
 
-    def _joint_stream_tick(self, dt: float) -> Reference:
+    def _joint_stream_tick(self, hold: np.ndarray, dt: float) -> Reference:
         """Joints at their streamed speeds (capped at each joint's maximum), stopping at the limits."""
         qdot = np.clip(self._stream_vel, -self.vmax, self.vmax)
-        q = np.clip(self._hold + qdot * dt, self.lower, self.upper)
-        qdot = (q - self._hold) / dt if dt > 0 else np.zeros(self.n)
+        q = np.clip(hold + qdot * dt, self.lower, self.upper)
+        qdot = (q - hold) / dt if dt > 0 else np.zeros(self.n)
         self._hold = q
         return Reference(q.tolist(), qdot.tolist())
 
-    def _solve(self, pose: np.ndarray) -> np.ndarray | None:
-        """IK near the held joints, or None when out of reach or past a limit."""
+    def _solve(self, pose: np.ndarray, near: np.ndarray) -> np.ndarray | None:
+        """IK near the joints `near`, or None when out of reach or past a limit."""
         try:
-            q = np.asarray(self.model.inv(pose, self._hold), float)
+            q = np.asarray(self.model.inv(pose, near), float)
         except RpcError:
             return None
         if np.any(q < self.lower) or np.any(q > self.upper):
             return None
         return q
 
-    def _stream_refused(self) -> Reference:
+    def _stream_refused(self, hold: np.ndarray) -> Reference:
         """Hold still at the edge of the workspace instead of jumping; streaming goes on."""
-        return Reference(self._hold.tolist(), [0.0] * self.n)
+        return Reference(hold.tolist(), [0.0] * self.n)
 
     # --- internals ----------------------------------------------------------------------
     def _bump(self, what: RpcError) -> None:

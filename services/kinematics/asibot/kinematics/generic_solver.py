@@ -39,17 +39,17 @@ class GenericSolver:
         # Fixed restart seeds, so that a failing solve is reproducible.
         self._seeds = list(np.random.default_rng(0).uniform(self.lower, self.upper, (24, len(self.idx_q))))
 
-    def _full(self, q: Sequence[float]) -> np.ndarray:
+    def _full(self, q: Sequence[float] | np.ndarray) -> np.ndarray:
         qq = self._q.copy()
         qq[self.idx_q] = q
         return qq
 
-    def fwd(self, q: Sequence[float]) -> np.ndarray:
+    def fwd(self, q: Sequence[float] | np.ndarray) -> np.ndarray:
         """4x4 transform of the tool link for joints q [rad]."""
         pin.framesForwardKinematics(self.model, self.data, self._full(q))
         return self.data.oMf[self.frame].homogeneous.copy()
 
-    def jacobian(self, q: Sequence[float]) -> np.ndarray:
+    def jacobian(self, q: Sequence[float] | np.ndarray) -> np.ndarray:
         """6x5 Jacobian [v; w] of the tool origin in base-aligned axes (same as AsibotSolver.jacobian)."""
         qq = self._full(q)
         pin.computeJointJacobians(self.model, self.data, qq)
@@ -75,7 +75,7 @@ class GenericSolver:
                 q = np.clip(q, self.lower, self.upper)
         return q, float(np.sqrt(err))
 
-    def inv(self, target: np.ndarray, q_guess: Sequence[float],
+    def inv(self, target: np.ndarray, q_guess: Sequence[float] | np.ndarray,
             what: str | Callable[[], str] = "The pose") -> np.ndarray:
         """Joints [rad] within limits reaching the 4x4 `target`, starting from q_guess.
 

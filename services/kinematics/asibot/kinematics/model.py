@@ -25,24 +25,26 @@ from .asibot_solver import AsibotSolver, tool_frame, transform_point
 from .generic_solver import GenericSolver
 
 POSE_SIZE = 5
+#: Joints or a pose: the controller and the server pass numpy arrays, tests and the catalog lists.
+Vector = Sequence[float] | np.ndarray
 
 
 class KinematicModel(Protocol):
     pose_size: int
 
-    def fwd(self, q: Sequence[float]) -> np.ndarray: ...
-    def inv(self, pose: Sequence[float], q_guess: Sequence[float]) -> np.ndarray: ...
-    def inv_path(self, poses: np.ndarray, q0: Sequence[float]) -> tuple[np.ndarray, RpcError | None]: ...
-    def jacobian(self, q: Sequence[float]) -> np.ndarray: ...
+    def fwd(self, q: Vector) -> np.ndarray: ...
+    def inv(self, pose: Vector, q_guess: Vector) -> np.ndarray: ...
+    def inv_path(self, poses: np.ndarray, q0: Vector) -> tuple[np.ndarray, RpcError | None]: ...
+    def jacobian(self, q: Vector) -> np.ndarray: ...
     def set_tool(self, tool: Sequence[float] | None) -> None: ...
-    def to_user_point(self, pose: Sequence[float]) -> list[float]: ...
-    def from_user_point(self, point: Sequence[float]) -> np.ndarray: ...
+    def to_user_point(self, pose: Vector) -> list[float]: ...
+    def from_user_point(self, point: Vector) -> np.ndarray: ...
 
 
 _user = poses.user_point
 
 
-def _si(point: Sequence[float]) -> np.ndarray:
+def _si(point: Vector) -> np.ndarray:
     if len(point) != POSE_SIZE or not all(math.isfinite(float(v)) for v in point):
         raise ValueError(f"A point is {POSE_SIZE} finite numbers [x, y, z, rot(y'), rot(z'')], got {list(point)!r}.")
     return np.array(poses.si_pose(point))
@@ -56,14 +58,14 @@ class AsibotModel:
     def __init__(self, solver: AsibotSolver | None = None) -> None:
         self.solver = solver or AsibotSolver()
 
-    def fwd(self, q: Sequence[float]) -> np.ndarray:
+    def fwd(self, q: Vector) -> np.ndarray:
         return _si(self.solver.fwd([math.degrees(v) for v in q]))
 
-    def inv(self, pose: Sequence[float], q_guess: Sequence[float]) -> np.ndarray:
+    def inv(self, pose: Vector, q_guess: Vector) -> np.ndarray:
         q = self.solver.inv(self.to_user_point(pose), [math.degrees(v) for v in q_guess])
         return np.radians(q)
 
-    def inv_path(self, poses: np.ndarray, q0: Sequence[float]) -> tuple[np.ndarray, RpcError | None]:
+    def inv_path(self, poses: np.ndarray, q0: Vector) -> tuple[np.ndarray, RpcError | None]:
         """IK along a path: each row of the N x 5 SI `poses` solved from the previous solution,
         the first from q0 (rad). Degrees and radians are converted once for the whole path,
         not per sample. Returns (N x 5 joints in rad, None), or at the first row that fails
@@ -81,7 +83,7 @@ class AsibotModel:
             out[i] = q
         return np.radians(out), None
 
-    def jacobian(self, q: Sequence[float]) -> np.ndarray:
+    def jacobian(self, q: Vector) -> np.ndarray:
         """6x5 [v; w] per rad, see AsibotSolver.jacobian."""
         return self.solver.jacobian([math.degrees(v) for v in q])
 
@@ -93,7 +95,7 @@ class AsibotModel:
     from_user_point = staticmethod(_si)
 
 
-def _approach_correction(s: GenericSolver, q: Sequence[float]) -> np.ndarray:
+def _approach_correction(s: GenericSolver, q: Vector) -> np.ndarray:
     """Rotation C (in tool axes) whose z is the approach direction: out of the last joint."""
     h = s.fwd(q)
     s.fwd(q)
@@ -125,14 +127,14 @@ class PinocchioModel:
         zeros removes it. An offset along the approach (z) keeps every 5-DOF pose reachable."""
         self._tool = tool_frame(tool)
 
-    def fwd(self, q: Sequence[float]) -> np.ndarray:
+    def fwd(self, q: Vector) -> np.ndarray:
         h = self.solver.fwd(q)
         h[:3, :3] = h[:3, :3] @ self.c
         if self._tool is not None:
             h = h @ self._tool
         return _si(transform_point(h, math.degrees(q[0])))
 
-    def inv(self, pose: Sequence[float], q_guess: Sequence[float]) -> np.ndarray:
+    def inv(self, pose: Vector, q_guess: Vector) -> np.ndarray:
         p = [float(v) for v in pose]
         h = np.eye(4)
         h[:3, :3] = point_rotation(p[0], p[1], p[3], p[4])
@@ -143,7 +145,7 @@ class PinocchioModel:
         shown = lambda: "The point [" + ", ".join(f"{v:.3g}" for v in self.to_user_point(p)) + "]"
         return self.solver.inv(h, q_guess, what=shown)
 
-    def inv_path(self, poses: np.ndarray, q0: Sequence[float]) -> tuple[np.ndarray, RpcError | None]:
+    def inv_path(self, poses: np.ndarray, q0: Vector) -> tuple[np.ndarray, RpcError | None]:
         """IK along a path, as AsibotModel.inv_path (SI throughout: nothing to convert)."""
         out = np.empty((len(poses), len(q0)))
         q = np.asarray(q0, float)
@@ -155,7 +157,7 @@ class PinocchioModel:
             out[i] = q
         return out, None
 
-    def jacobian(self, q: Sequence[float]) -> np.ndarray:
+    def jacobian(self, q: Vector) -> np.ndarray:
         return self.solver.jacobian(q)
 
     to_user_point = staticmethod(_user)

@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from types import SimpleNamespace
-from typing import Any, Mapping
+from typing import Any, Mapping, TypeGuard
 
 import numpy as np
 
@@ -77,7 +77,7 @@ def shown(value: object) -> str:
         return f"a {type(value).__name__} nested too deep to show"
 
 
-def _real(value: object) -> bool:
+def _real(value: object) -> TypeGuard[int | float]:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 

@@ -292,6 +292,8 @@ class KinematicsServer(Service):
             while True:
                 self._grip_changed.wait(0.05)
                 now, state = time.monotonic(), self._grip
+                if state is None:
+                    raise RuntimeError("the gripper state was cleared; _on_gripper only ever replaces it")
                 if abs(state.opening - target) < GRIP_AT_TARGET:
                     return state
                 if self.ctl.estop:  # the driver stops the fingers and refuses their commands

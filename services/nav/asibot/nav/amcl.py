@@ -142,7 +142,7 @@ class Amcl:
             raise NavError("The map has no free cell: the robot cannot be anywhere on it.")
         self._free = np.c_[self.info.to_world(fr, fc)]
         self._table_key: float | None = None
-        self._table = np.zeros(0, np.float32)
+        self._table: np.ndarray = np.zeros(0)   # float64, as the pz table that replaces it
         self.poses = np.zeros((0, 3))
         self.weights = np.zeros(0)
         self.w_slow = self.w_fast = 0.0
@@ -380,10 +380,15 @@ class Amcl:
         converged = bool((np.abs(x - gx) <= p.converged_dist).all() and (np.abs(y - gy) <= p.converged_dist).all())
         return Estimate(Pose(mx, my, mt), cov, converged, len(x))
 
-    def pose(self, odom: Pose) -> Pose:
-        """The robot's map pose now: the last estimate carried forward by odometry."""
+    def current_estimate(self) -> Estimate:
+        """The last estimate; NavError before the filter has a starting point."""
         if self.estimate is None:
             raise NavError("Localisation has no starting point yet: set the initial pose first.")
+        return self.estimate
+
+    def pose(self, odom: Pose) -> Pose:
+        """The robot's map pose now: the last estimate carried forward by odometry."""
+        est = self.current_estimate()
         if self._odom is None:
-            return self.estimate.pose
-        return compose(self.estimate.pose, relative(self._odom, odom))
+            return est.pose
+        return compose(est.pose, relative(self._odom, odom))

@@ -222,7 +222,8 @@ class Costmap:
         costs = self.costs
         return np.where(costs == INSCRIBED, FREE, costs).astype(np.uint8)
 
-    def footprint_cost(self, x: np.ndarray, y: np.ndarray, theta: np.ndarray, grown: bool = True) -> np.ndarray:
+    def footprint_cost(self, x: np.ndarray | float, y: np.ndarray | float, theta: np.ndarray | float,
+                       grown: bool = True) -> np.ndarray:
         """Highest cost under the footprint's outline (`rim_costs`) and centre at each pose
         (arrays of any shape): >= INSCRIBED means the robot would touch an obstacle or leave
         the map. Inside the outline only the centre is looked up: every cell of the P3-AT's

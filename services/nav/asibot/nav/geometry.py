@@ -8,7 +8,7 @@ AMCL's map->odom correction does) without matrices.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import Iterable, NamedTuple
 
 import numpy as np
 
@@ -54,10 +54,14 @@ def as_pose(value: object, what: str = "pose") -> Pose:
     """A Pose from (x, y, theta) numbers, or NavError with a sentence naming `what`."""
     if isinstance(value, dict):
         value = (value.get("x"), value.get("y"), value.get("theta", 0.0))
-    try:
-        items = list(value)  # type: ignore[call-overload]
-    except TypeError:
-        raise NavError(f"The {what} must be three numbers x, y, theta (m, m, rad); got {quote(value)}.") from None
+    items: list[object] | None = None
+    if isinstance(value, Iterable):
+        try:
+            items = list(value)
+        except TypeError:          # an iterable in name only: a 0-d array
+            pass
+    if items is None:
+        raise NavError(f"The {what} must be three numbers x, y, theta (m, m, rad); got {quote(value)}.")
     if len(items) != 3:
         raise NavError(f"The {what} must be three numbers x, y, theta (m, m, rad); got {len(items)} values.")
     out = []

@@ -33,7 +33,7 @@ class GridInfo:
     def size_m(self) -> tuple[float, float]:
         return (self.width * self.resolution, self.height * self.resolution)
 
-    def _local(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _local(self, x: np.ndarray | float, y: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
         dx, dy = np.asarray(x, float) - self.origin.x, np.asarray(y, float) - self.origin.y
         if self.origin.theta == 0.0:
             return dx, dy
@@ -42,7 +42,7 @@ class GridInfo:
 
     def to_cell(self, x: np.ndarray | float, y: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
         """(row, col) int arrays of the cells holding world points; may lie outside the grid."""
-        lx, ly = self._local(x, y)  # type: ignore[arg-type]
+        lx, ly = self._local(x, y)
         return (np.floor(ly / self.resolution).astype(np.int64), np.floor(lx / self.resolution).astype(np.int64))
 
     def to_world(self, row: np.ndarray | float, col: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:

@@ -165,13 +165,14 @@ class Navigator:
         if scan is not None and finite and all(math.isfinite(v) for v in at):
             self.costmap.update_scan(at, scan, now)
         localised = localised and finite
-        if self.status.state != ACTIVE:
+        goal = self.status.goal
+        if self.status.state != ACTIVE or goal is None:   # an active status always has its goal
             if self._send_stop:
                 self._send_stop = False
                 return Command(0.0, 0.0)
             return None
         velocity = (float(odom.vx), float(odom.wz)) if odom is not None else (0.0, 0.0)
-        label = goal_label(self.status.goal, self.status.place)  # type: ignore[arg-type]
+        label = goal_label(goal, self.status.place)
         # localisation
         if not localised:
             self._lost_since = now if self._lost_since is None else self._lost_since
@@ -187,7 +188,7 @@ class Navigator:
         forced = self._need_plan or self._path_blocked(pose)
         if forced or now - self._last_plan >= self.params.replan_period:
             try:
-                path = self.planner.plan(self.costmap, pose, self.status.goal, label)  # type: ignore[arg-type]
+                path = self.planner.plan(self.costmap, pose, goal, label)
             except NavError as exc:
                 return self._abort(f"could not reach {label}: {exc.message}")
             except Unreachable as exc:

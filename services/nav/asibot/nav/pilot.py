@@ -157,7 +157,7 @@ class Pilot:
 
     def pose(self) -> Pose:
         """The map pose now (the filter's estimate, or the mapper's, carried forward by odometry)."""
-        return self._pose_at(self._odom.pose) if self._odom is not None else self.amcl.estimate.pose
+        return self._pose_at(self._odom.pose) if self._odom is not None else self.amcl.current_estimate().pose
 
     def _pose_at(self, odom: Pose) -> Pose:
         if self.mapping and self.mapper is not None:
@@ -165,10 +165,11 @@ class Pilot:
         return self.amcl.pose(odom)
 
     def pose_message(self) -> m.NavPose:
-        p, est = self.pose(), self.amcl.estimate
+        p = self.pose()
         if self.mapping:
             return m.NavPose(x=p.x, y=p.y, theta=p.theta, covariance=[0.0] * 9, localised=True,
                              particles=np.zeros((0, 3), np.float32))
+        est = self.amcl.current_estimate()
         n = len(self.amcl.poses)
         pick = self._rng.choice(n, size=min(n, self.params.particles_shown), replace=False)
         return m.NavPose(x=p.x, y=p.y, theta=p.theta, covariance=est.covariance.reshape(-1).tolist(),
@@ -292,12 +293,13 @@ class Pilot:
         """"I am here": restart the filter around `pose` (any running goal ends: the way there was
         planned from a pose that was wrong)."""
         p = as_pose(pose, "pose")
+        variances: tuple[float, float, float] | None = None
         if cov is not None:
             if not isinstance(cov, (list, tuple)) or len(cov) != 3 or not all(
                     isinstance(v, (int, float)) and not isinstance(v, bool) for v in cov):
                 raise NavError("cov must be three variances [xx, yy, theta-theta] (m^2, m^2, rad^2).")
-            cov = tuple(float(v) for v in cov)
-        self.amcl.set_pose(p, cov)   # raises on a pose off the map, changing nothing
+            variances = (float(cov[0]), float(cov[1]), float(cov[2]))
+        self.amcl.set_pose(p, variances)   # raises on a pose off the map, changing nothing
         self._end_everything(now, "my position was set again")
         self._scan_used = False      # the next scan corrects the new guess at once
         return {"pose": list(p)}
@@ -417,13 +419,15 @@ class Pilot:
             if motion.active:
                 return Command(motion.vx, motion.wz)
             self._driving = False
-            done = motion.text.endswith(": done")
+            done = motion.done
             self._drive_state = SUCCEEDED if done else ABORTED
             self.on_event("info" if done else "warning", "drive_done" if done else "drive_stopped", motion.text)
             return Command(0.0, 0.0)
         # the costmap takes a scan only where it was taken (a scan that cannot be placed waits)
-        placed = scan if self._scan_odom is not None else None
-        scan_pose = self._pose_at(self._scan_odom) if placed is not None else None
+        placed: m.LaserScan | None = None
+        scan_pose: Pose | None = None
+        if scan is not None and self._scan_odom is not None:
+            placed, scan_pose = scan, self._pose_at(self._scan_odom)
         cmd = self.navigator.step(now, self.pose(), placed, odom, localised=self.localised, scan_pose=scan_pose)
         self._tell_goal_end()
         return cmd

@@ -166,7 +166,8 @@ class Places:
         if existing is None and len(self._places) >= MAX_PLACES:
             raise NavError(f"There are already {MAX_PLACES} places; remove one first.")
         places = dict(self._places)
-        places.pop(existing, None)  # type: ignore[arg-type]
+        if existing is not None:
+            places.pop(existing)
         places[tidy] = p
         self._commit(places, self._saved)
         return Place(tidy, p)

@@ -68,10 +68,13 @@ class Settings:
 
 @dataclass
 class Motion:
+    """Speeds for now; once `active` is False the primitive has ended, `done` says whether it
+    went the whole way (else `text` says why it stopped)."""
     vx: float
     wz: float
     active: bool
     text: str = ""
+    done: bool = False
 
 
 class Primitives:
@@ -161,9 +164,9 @@ class Primitives:
         self.last_text = text
         return text
 
-    def _end(self, text: str) -> Motion:
+    def _end(self, text: str, done: bool = False) -> Motion:
         self.stop(text)
-        return Motion(0.0, 0.0, False, text)
+        return Motion(0.0, 0.0, False, text, done)
 
     def step(self, now: float, odom: Pose, scan: LaserScan | None) -> Motion:
         """Speeds for now; `active` False (and zero speeds) once the primitive has ended."""
@@ -184,20 +187,20 @@ class Primitives:
             along = (d.x * math.cos(self._start.theta) + d.y * math.sin(self._start.theta)) * self._dir
             left = self._target - along
             if left <= 0.005:
-                return self._end(f"{self._name}: done")
+                return self._end(f"{self._name}: done", done=True)
             v = min(self._v, math.sqrt(2 * lim.acc_x * decel * left), max(0.03, 1.5 * left))
             vx = self._dir * v
             wz = float(np.clip(2.0 * wrap(self._start.theta - odom.theta), -0.3, 0.3))
         elif self._kind == "turn":
             left = self._target - self._turned
             if left <= math.radians(0.5):
-                return self._end(f"{self._name}: done")
+                return self._end(f"{self._name}: done", done=True)
             w = min(self._w, math.sqrt(2 * lim.acc_wz * decel * left), max(0.08, 2.0 * left))
             vx, wz = 0.0, self._side * w
         else:
             left = self._target - self._travelled
             if left <= 0.005:
-                return self._end(f"{self._name}: done")
+                return self._end(f"{self._name}: done", done=True)
             scale = min(1.0, math.sqrt(2 * lim.acc_x * decel * left) / self._v, max(0.03, 1.5 * left) / self._v)
             # backward left ends behind and to the left, as a car backing with the wheel turned left
             vx, wz = self._dir * self._v * scale, self._dir * self._side * self._w * scale

@@ -86,7 +86,7 @@ class NavService(Service):
         bus.watch(keys.driver_alive(robot), self.hold.forget)
         self._latch_map()
         bus.subscribe(keys.base_odom(robot), m.Odometry, self._on_odom)
-        bus.subscribe(keys.scan(robot), m.LaserScan, self._on_scan, maxsize=1, ring=True)
+        bus.subscribe(keys.scan(robot), m.LaserScan, self._on_scan, maxsize=1)
         self.estop = EStopState(bus, robot, self._on_estop)
         for verb in keys.RPC_VERBS_NAV:
             bus.serve(keys.nav_rpc(robot, verb), self._handler(verb))
@@ -138,7 +138,8 @@ class NavService(Service):
             cmd = self.pilot.tick(now)
             pose = self.pilot.pose_message() if now - self._last_pose >= self.pose_period else None
             path = self.pilot.status().path
-            building = (self.pilot.map_grid() if self.pilot.mapping and self.pilot.mapper.stats.scans
+            mapper = self.pilot.mapper if self.pilot.mapping else None
+            building = (self.pilot.map_grid() if mapper is not None and mapper.stats.scans
                         and now - self._last_map >= self.map_period else None)
         if building is not None:
             self._last_map = now

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -134,7 +135,8 @@ class DepthToScan:
             self._zlo, self._zhi = zlo.astype(np.float32), zhi.astype(np.float32)
             self._bearing = bearing[row].copy()
             self._hn = hn[row].astype(np.float32)
-            self._cols_used = usable.any(axis=0)
+            # One axis of a 2-D mask: an array, which the stubs cannot tell from a scalar.
+            self._cols_used = cast(np.ndarray, usable.any(axis=0))
         else:
             self._setup_bins(zlo, zhi, hn, bearing, usable)
         used = self._bearing[self._bin_used()]

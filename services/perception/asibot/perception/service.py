@@ -106,10 +106,10 @@ class PerceptionService(Service):
                           lambda msg, name=name: self._on_info(name, msg))
         for name in options.depth_cameras:
             bus.subscribe(keys.camera_depth(robot, name), m.DepthImage,
-                          lambda msg, name=name: self._on_depth(name, msg), maxsize=1, ring=True)
+                          lambda msg, name=name: self._on_depth(name, msg), maxsize=1)
         if options.rgb_camera:
             bus.subscribe(keys.camera_rgb(robot, options.rgb_camera), m.RgbImage, self._on_rgb,
-                          maxsize=1, ring=True)
+                          maxsize=1)
         if options.sonar is not None:
             bus.subscribe(keys.base_sonar(robot), m.Sonar, self._on_sonar)
         bus.subscribe(keys.base_odom(robot), m.Odometry, self._on_odom)
@@ -151,8 +151,11 @@ class PerceptionService(Service):
             self._publish([f.scan for f in frames], max(f.stamp for f in frames), now)
 
     def _on_sonar(self, msg: m.Sonar) -> None:
+        ring = self.opt.sonar
+        if ring is None:    # subscribed only with a ring
+            return
         try:
-            self.opt.sonar.check(msg)
+            ring.check(msg)
         except BadInput as exc:
             self.bus.reject(keys.base_sonar(self.robot), exc)
             return
@@ -169,8 +172,9 @@ class PerceptionService(Service):
     def _publish(self, scans: list, stamp: int, now: float) -> None:
         with self._lock:
             ranges = merge(self.opt.grid, scans)
-            if self._sonar is not None and now - self._sonar[1] <= self.opt.freshness:
-                ranges = self.opt.sonar.fuse(self.opt.grid, ranges, self._sonar[0])
+            ring = self.opt.sonar
+            if ring is not None and self._sonar is not None and now - self._sonar[1] <= self.opt.freshness:
+                ranges = ring.fuse(self.opt.grid, ranges, self._sonar[0])
             self._pub_scan.put(self.opt.grid.message(ranges, stamp))
             self.scans += 1
             odom = self._odom if self._odom is not None and now - self._odom[1] <= self.opt.freshness else None

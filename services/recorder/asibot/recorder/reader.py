@@ -101,7 +101,8 @@ class Reading:
             _check_magic(f, self.path)
             self.live = being_written(self.path)
             source = Follow(f, self.path, self._stop) if self._follow else Snapshot(f)
-            reader = NonSeekingReader(source, validate_crcs=False)
+            # mcap annotates IO[bytes], but its NonSeekingReader only ever calls read().
+            reader = NonSeekingReader(source, validate_crcs=False)  # type: ignore[arg-type]
             it = reader.iter_messages(log_time_order=False)
             try:
                 while True:

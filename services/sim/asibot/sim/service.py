@@ -16,12 +16,13 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
+from typing import TypedDict
 
 import mujoco
 
 from asibot import keys
 from asibot import messages as m
-from asibot.bus import Bus
+from asibot.bus import Bus, Publisher
 from asibot.safety.driver_contract import DriverContract, command
 from asibot.errors import RpcError
 from asibot.runtime import Service
@@ -53,6 +54,12 @@ class Options:
     depth_method: str = "render"
     viewer: bool = False
     """Show MuJoCo's viewer on the main thread (needs a DISPLAY)."""
+
+
+class _CameraPublishers(TypedDict):
+    info: Publisher[m.CameraInfo]
+    depth: Publisher[m.DepthImage]
+    rgb: Publisher[m.RgbImage]
 
 
 class SimService(Service):
@@ -187,7 +194,7 @@ class SimService(Service):
         robot_body = sim.scene.base.body if sim.scene.base else sim.scene.arm_base_body
         cams = [Camera(sim.model, name, opt.width, opt.height, robot_body)
                 for name in sim.scene.cameras if name in CAMERA_KINDS]
-        pubs = {}
+        pubs: dict[str, _CameraPublishers] = {}
         for c in cams:
             pubs[c.name] = {"info": self.bus.publisher(keys.camera_info(self.robot_id, c.name), m.CameraInfo),
                             "depth": self.bus.publisher(keys.camera_depth(self.robot_id, c.name), m.DepthImage),
@@ -195,8 +202,8 @@ class SimService(Service):
         data = mujoco.MjData(sim.model)
         try:
             first = True
-            ticker = None
-            while first or ticker.wait():
+            ticker: Ticker | None = None   # made after the first frame, when the cameras are warm
+            while first or (ticker is not None and ticker.wait()):
                 sim.copy_positions(data)
                 mujoco.mj_kinematics(sim.model, data)
                 mujoco.mj_camlight(sim.model, data)

@@ -26,7 +26,7 @@ from asibot.sim import sensors
 from asibot.sim.arm import BadCommand, CommandRejected, JointLimits, JointTracker, Notice
 from asibot.sim.base import BaseDrive, Odometer
 from asibot.sim.places import load_places
-from asibot.sim.scene import WORLDS, Scene, build
+from asibot.sim.scene import WORLDS, Base, Scene, build
 
 ODOM_PERIOD_S = 0.02
 GRASP_CHECK_STEPS = 5
@@ -99,8 +99,9 @@ class Simulation:
             self.arm.q_ref = home.copy()
             self.arm.mode, self.arm.fault = "idle", ""
             self.arm.hold()
-            if self.base:
+            if self.base is not None:
                 self.base.stop()
+            if self.odom is not None:
                 self.odom.reset()
             self._apply_controls(0.0, 0.0)
             mujoco.mj_forward(self.model, self.data)
@@ -249,14 +250,14 @@ class Simulation:
         self.data.ctrl[b.actuators] = (vx * math.cos(yaw), vx * math.sin(yaw), wz)
 
     def _integrate_odometry(self, dt: float, commanded_vx: float) -> None:
-        b = self.scene.base
+        b, odom = self._mobile_base(), self._odometer()
         qv = self.data.qvel[b.dof]
         yaw = self.data.qpos[b.qpos[2]]
         self._odom_sum += (qv[0] * math.cos(yaw) + qv[1] * math.sin(yaw), qv[2])
         self._odom_acc += dt
         if self._odom_acc >= ODOM_PERIOD_S - 1e-9:
             vx, wz = self._odom_sum * dt / self._odom_acc
-            self.odom.update(float(vx), float(wz), self._odom_acc)
+            odom.update(float(vx), float(wz), self._odom_acc)
             x, y, _ = self.truth()
             charging = any(math.hypot(x - px, y - py) < CHARGE_RADIUS_M
                            for name, (px, py, _) in self.places.items() if "charg" in name)
@@ -313,6 +314,17 @@ class Simulation:
         d.eq_active[eq] = 1
 
     # ------------------------------------------------------------------ readings
+    def _mobile_base(self) -> Base:
+        """The scene's base; reading one of an arm-only robot is the caller's mistake."""
+        if self.scene.base is None:
+            raise ValueError(f"{self.robot.robot_id} has no mobile base")
+        return self.scene.base
+
+    def _odometer(self) -> Odometer:
+        if self.odom is None:
+            raise ValueError(f"{self.robot.robot_id} has no mobile base, hence no odometry")
+        return self.odom
+
     def arm_state(self) -> m.ArmState:
         with self.lock:
             s = self.scene
@@ -336,24 +348,24 @@ class Simulation:
 
     def odometry(self) -> m.Odometry:
         with self.lock:
-            o = self.odom
+            o = self._odometer()
             return m.Odometry(x=o.x, y=o.y, theta=o.theta, vx=o.vx, wz=o.wz)
 
     def truth(self) -> tuple[float, float, float]:
         """Ground-truth base pose in the map (world) frame."""
         with self.lock:
-            b = self.scene.base.body
+            b = self._mobile_base().body
             r = self.data.xmat[b]
             return (float(self.data.xpos[b][0]), float(self.data.xpos[b][1]), math.atan2(r[3], r[0]))
 
     def sonar(self) -> m.Sonar:
         with self.lock:
-            return m.Sonar(ranges=sensors.sonar_ranges(self.model, self.data, self.scene.base),
+            return m.Sonar(ranges=sensors.sonar_ranges(self.model, self.data, self._mobile_base()),
                            angles=sensors.sonar_angles())
 
     def bumpers(self) -> m.Bumpers:
         with self.lock:
-            front, rear = sensors.bumpers(self.model, self.data, self.scene.base, self.scene.robot_bodies)
+            front, rear = sensors.bumpers(self.model, self.data, self._mobile_base(), self.scene.robot_bodies)
             return m.Bumpers(front=front, rear=rear)
 
     def object_position(self, name: str) -> np.ndarray:

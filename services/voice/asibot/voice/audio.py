@@ -31,7 +31,7 @@ from asibot.voice.errors import BadAudio
 
 RATE = 16000
 MIN_RATE, MAX_RATE = 8000, 48000
-SAMPLE_TYPES = {"int16": np.dtype("<i2"), "float32": np.dtype("<f4")}
+SAMPLE_TYPES: dict[str, np.dtype] = {"int16": np.dtype("<i2"), "float32": np.dtype("<f4")}
 MAX_CHUNK_SECONDS = 10.0
 """A streamed chunk is a few tens of ms; ten seconds at once is a client bug, refused
 before it costs memory."""
@@ -41,26 +41,53 @@ MAX_CLIP_SECONDS = 60.0
 Chunk = Union[bytes, bytearray, memoryview, np.ndarray]
 
 
+SampleType = Literal["int16", "float32"]
+
+
+def _check_rate(value: object) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise BadAudio(f"The sample rate must be a whole number of Hz; got {value!r}.")
+    if not MIN_RATE <= value <= MAX_RATE:
+        raise BadAudio(f"The sample rate {value} Hz is not supported; send audio at "
+                       f"{MIN_RATE} to {MAX_RATE} Hz (16000 is best).")
+    return int(value)
+
+
+def _check_sample(value: object) -> SampleType:
+    if value == "int16":
+        return "int16"
+    if value == "float32":
+        return "float32"
+    raise BadAudio(f"The sample type {value!r} is not supported; send 'int16' or 'float32' "
+                   "(little-endian).")
+
+
+def _check_channels(value: object) -> int:
+    if value not in (1, 2):
+        raise BadAudio(f"Audio with {value!r} channels is not supported; send mono or "
+                       "interleaved stereo.")
+    return 1 if value == 1 else 2
+
+
 @dataclass(frozen=True)
 class AudioFormat:
     """What a client sends: sample rate (Hz), sample type (little-endian), channels."""
 
     rate: int
-    sample: Literal["int16", "float32"] = "int16"
+    sample: SampleType = "int16"
     channels: int = 1
 
     def __post_init__(self) -> None:
-        if isinstance(self.rate, bool) or not isinstance(self.rate, (int, np.integer)):
-            raise BadAudio(f"The sample rate must be a whole number of Hz; got {self.rate!r}.")
-        if not MIN_RATE <= self.rate <= MAX_RATE:
-            raise BadAudio(f"The sample rate {self.rate} Hz is not supported; send audio at "
-                           f"{MIN_RATE} to {MAX_RATE} Hz (16000 is best).")
-        if self.sample not in SAMPLE_TYPES:
-            raise BadAudio(f"The sample type {self.sample!r} is not supported; send 'int16' or 'float32' "
-                           "(little-endian).")
-        if self.channels not in (1, 2):
-            raise BadAudio(f"Audio with {self.channels!r} channels is not supported; send mono or "
-                           "interleaved stereo.")
+        # The annotations say what a checked format holds; a caller may still pass anything.
+        _check_rate(self.rate)
+        _check_sample(self.sample)
+        _check_channels(self.channels)
+
+    @classmethod
+    def parse(cls, rate: object, sample: object = "int16", channels: object = 1) -> AudioFormat:
+        """The format from values not checked yet (a request, a message); BadAudio as the
+        constructor's for a wrong one."""
+        return cls(_check_rate(rate), _check_sample(sample), _check_channels(channels))
 
     @property
     def frame_bytes(self) -> int:

@@ -25,6 +25,7 @@ from __future__ import annotations
 import multiprocessing
 import threading
 from concurrent.futures import ProcessPoolExecutor, TimeoutError as FutureTimeout
+from typing import Iterable, Protocol
 
 import numpy as np
 
@@ -80,7 +81,21 @@ class PhoneReader:
                 self._pool = None
 
 
-_decoders: dict[tuple[float, bool], object] = {}      # in the child: one decoder per setting, kept
+class _Segment(Protocol):
+    word: str
+
+
+class _Decoder(Protocol):
+    """What is used of pocketsphinx's Decoder, which has no type information."""
+
+    def reinit_feat(self) -> None: ...
+    def start_utt(self) -> None: ...
+    def process_raw(self, data: bytes, no_search: bool = False, full_utt: bool = False) -> int: ...
+    def end_utt(self) -> None: ...
+    def seg(self) -> Iterable[_Segment] | None: ...
+
+
+_decoders: dict[tuple[float, bool], _Decoder] = {}      # in the child: one decoder per setting, kept
 
 
 def _read(pcm: bytes, lw: float, context_dependent: bool) -> tuple[str, ...]:

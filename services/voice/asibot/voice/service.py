@@ -28,6 +28,7 @@ import queue
 import threading
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -48,6 +49,9 @@ from asibot.voice.pronunciations import Pronunciations
 from asibot.voice.recognizer import Recognizer, Result
 from asibot.voice.speaker import Speaker
 from asibot.voice.streams import FORGET_AFTER, Streams
+
+if TYPE_CHECKING:   # main() imports the microphone only for --local-mic
+    from asibot.voice.mic import LocalMic
 
 NAME = "voice"
 DEFAULT_ROBOT = "asibot-sim"
@@ -129,7 +133,7 @@ class VoiceService(runtime.Service):
         self._task_words: list[str] = []
         self._grammar_lock = threading.Lock()    # a refresh and a word learned rebuild the grammar one at a time
         self._relisten()                         # a learned "stop" counts before the Task Creator answers
-        self.mic = None
+        self.mic: LocalMic | None = None
         self._asked_by = ""
         self._stop = threading.Event()
         self._waiting: queue.Queue = queue.Queue(MAX_WAITING)
@@ -278,7 +282,7 @@ class VoiceService(runtime.Service):
                 if not isinstance(sample, str):
                     raise RpcError("bad_request", f"sample must be 'int16' or 'float32'; got {quote(sample, 40)}. "
                                                   "Nothing was learned.")
-                fmt = AudioFormat(req.get("rate"), sample, req.get("channels", 1))
+                fmt = AudioFormat.parse(req.get("rate"), sample, req.get("channels", 1))
                 decode(req["data"], fmt, max_seconds=MAX_RECORDING)       # every check, before the work
                 learned = self.learner.learn_recording(req["word"], to_16k(req["data"], fmt))
             else:
@@ -292,6 +296,9 @@ class VoiceService(runtime.Service):
 
     def _next_utterance(self, source: object, seconds: object) -> np.ndarray:
         """The next utterance said on live `source`, which then launches nothing; RpcError timeout."""
+        if not isinstance(source, str):
+            raise RpcError("bad_request", f"source must be the name of an audio source; got {quote(source, 40)}. "
+                                          "Nothing was learned.")
         keys.voice_audio(source)                                   # ValueError naming a bad source
         if seconds is None:
             seconds = LISTEN_SECONDS

@@ -90,7 +90,7 @@ class Streams:
     def put(self, source: str, data: bytes, rate: int, sample: str = "int16", channels: int = 1) -> bool:
         """Queue one chunk of `source`; False (and a notice) when it is refused."""
         try:
-            fmt = AudioFormat(rate, sample, channels)      # type: ignore[arg-type]
+            fmt = AudioFormat.parse(rate, sample, channels)
             decode(data, fmt, max_seconds=self.max_chunk)   # every check, before anything is kept
         except BadAudio as exc:
             return self._refuse(source, "warning", "bad_audio", str(exc))

@@ -106,8 +106,9 @@ class Vad:
         self._max_frames = round(c.max_utterance * RATE / FRAME)
         self._min_frames = round(c.min_speech * RATE / FRAME)
         # pre-roll before the first frame of the window that started the phrase
-        self._pre = collections.deque(maxlen=round(c.pre_roll * RATE / FRAME) + c.start_window)
-        self._recent = collections.deque(maxlen=c.start_window)      # loud-or-not of the last frames
+        self._pre: collections.deque[np.ndarray] = collections.deque(
+            maxlen=round(c.pre_roll * RATE / FRAME) + c.start_window)
+        self._recent: collections.deque[bool] = collections.deque(maxlen=c.start_window)  # loud or not, last frames
         self.reset()
 
     def reset(self) -> None:

@@ -6,7 +6,7 @@ robot's nav service (`keys.nav_rpc`); its refusals reach the page as its sentenc
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal
+from typing import Annotated, Literal, get_args
 
 from fastapi import APIRouter, Request
 from pydantic import Field, StrictBool, StrictStr
@@ -25,7 +25,8 @@ DRIVE_ROWS = (("curve forward left", "forward", "curve forward right"),
               ("turn left", "stop", "turn right"),
               ("curve backward left", "backward", "curve backward right"),
               ("turn left 90", "turn around", "turn right 90"))
-CHANGES = ("faster", "slower", "wider", "narrower")
+ChangeName = Literal["faster", "slower", "wider", "narrower"]
+CHANGES: tuple[str, ...] = get_args(ChangeName)
 #: Nav answers at once (a goal runs on after the answer); a slow answer is a stuck service.
 NAV_TIMEOUT = 5.0
 
@@ -43,12 +44,12 @@ class Goal(Strict):
 
 class Drive(Strict):
     """One primitive; `continuous` goes on until Stop (or an obstacle), else one step of the width."""
-    name: Literal[DRIVES]   # type: ignore[valid-type]
+    name: Literal[DRIVES]   # type: ignore[valid-type]  # the primitives' names, known at import only
     continuous: StrictBool = False
 
 
 class Change(Strict):
-    change: Literal[CHANGES]   # type: ignore[valid-type]
+    change: ChangeName
 
 
 class NewPlace(Strict):
@@ -84,12 +85,13 @@ def nav_map(robot: RobotId, request: Request) -> dict:
 
 @router.post("/{robot}/goto", summary="go to a named place or to a point of the map")
 async def goto(robot: RobotId, body: Goal, request: Request) -> dict:
-    if (body.place is None) == (body.x is None or body.y is None):
-        raise RpcError("bad_request", "Say where to go: a place, or a point x and y (m) of the map, not both.")
-    if body.place is not None:
+    x, y = body.x, body.y
+    if body.place is not None and (x is None or y is None):
         return await _run(_nav, request, robot, "goto", place=body.place)
-    theta = math.radians(body.theta_deg) if body.theta_deg is not None else _facing(request, robot, body.x, body.y)
-    return await _run(_nav, request, robot, "goto", pose=[float(body.x), float(body.y), theta])
+    if body.place is not None or x is None or y is None:
+        raise RpcError("bad_request", "Say where to go: a place, or a point x and y (m) of the map, not both.")
+    theta = math.radians(body.theta_deg) if body.theta_deg is not None else _facing(request, robot, x, y)
+    return await _run(_nav, request, robot, "goto", pose=[float(x), float(y), theta])
 
 
 def _facing(request: Request, robot: str, x: float, y: float) -> float:

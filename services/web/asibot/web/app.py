@@ -118,7 +118,7 @@ class _TooBig(Exception):
     pass
 
 
-def create_app(web: Web) -> FastAPI:
+def create_app(web: Web) -> guard.PageGuard:
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI):
         pusher = asyncio.create_task(web.live.pusher())
@@ -191,7 +191,7 @@ def create_app(web: Web) -> FastAPI:
         return HTMLResponse(page, headers={"Cache-Control": "no-store"})
 
     app.mount("/static", StaticFiles(directory=STATIC), name="static")
-    return guard.PageGuard(BodyLimit(app), web.callers, web.session)  # type: ignore[return-value]
+    return guard.PageGuard(BodyLimit(app), web.callers, web.session)
 
 
 def _stop_quietly(web: Web, robot: str) -> None:

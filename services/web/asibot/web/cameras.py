@@ -27,7 +27,7 @@ class Cameras:
     def __init__(self, bus: Bus) -> None:
         self._cond = threading.Condition()
         self._frames: dict[tuple[str, str], tuple[int, float, bytes]] = {}   # seq, time, payload
-        bus.subscribe_raw(keys.every_robot(keys.camera_rgb, "*"), self._on_frame, ring=True, maxsize=4)
+        bus.subscribe_raw(keys.every_robot(keys.camera_rgb, "*"), self._on_frame, maxsize=4)
 
     def _on_frame(self, key: str, payload: bytes, stamp_ns: int) -> None:
         robot, name = keys.robot_of(key), keys.camera_of(key)

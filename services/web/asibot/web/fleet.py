@@ -9,6 +9,7 @@ that (`Fleet.view`), in the user's units (m and deg), pushed over its WebSocket.
 from __future__ import annotations
 
 import collections
+import functools
 import math
 import threading
 import time
@@ -94,7 +95,7 @@ class Fleet:
         for pattern, what in ((keys.ALL_DRIVERS, "driver"), (keys.ALL_CONTROLLERS, "controller")):
             for key in bus.alive(pattern):  # before watch(): see the bus's liveliness notes
                 self._alive(what, key, True)
-            bus.watch(pattern, lambda key, alive, what=what: self._alive(what, key, alive))
+            bus.watch(pattern, functools.partial(self._alive, what))
         self._follow(keys.arm_state, ArmState, "arm")
         self._follow(keys.cart_state, CartState, "cart")
         self._follow(keys.gripper_state, GripperState, "gripper")
@@ -110,7 +111,7 @@ class Fleet:
     def _follow(self, key_of_robot: Callable[[str], str], msg_type: type, attr: str) -> None:
         # A ring of one: the page needs the newest state, never a backlog of old ones.
         self.bus.subscribe(keys.every_robot(key_of_robot), msg_type, self._on(attr),
-                           with_key=True, ring=True, maxsize=1)
+                           with_key=True, maxsize=1)
 
     def _view(self, robot_id: str) -> RobotView:
         view = self._robots.get(robot_id)

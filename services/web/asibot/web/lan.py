@@ -31,8 +31,10 @@ def lan_addresses() -> list[str]:
     """This machine's IPv4 addresses other than loopback (for the address to print)."""
     found: set[str] = set()
     try:
-        for info in socket.getaddrinfo(socket.gethostname(), None, socket.AF_INET):
-            found.add(info[4][0])
+        for *_, sockaddr in socket.getaddrinfo(socket.gethostname(), None, socket.AF_INET):
+            host = sockaddr[0]
+            if isinstance(host, str):     # always, for AF_INET: (host, port)
+                found.add(host)
     except OSError:
         pass
     return sorted(a for a in found if not a.startswith("127."))

@@ -138,7 +138,7 @@ def landlock_abi() -> int:
 
 def _mounts(fstype: str) -> list[tuple[str, set[str]]]:
     """(mount point, super options) of every mount of `fstype`, from /proc/self/mountinfo."""
-    found = []
+    found: list[tuple[str, set[str]]] = []
     try:
         lines = Path("/proc/self/mountinfo").read_text().splitlines()
     except OSError:
@@ -237,7 +237,7 @@ def _remove_stale(parent: Path) -> None:
 
 def _cgroup_v1() -> dict[str, str]:
     own = _own_cgroups()
-    found = {}
+    found: dict[str, str] = {}
     for point, options in _mounts("cgroup"):
         for controller in ("memory", "pids"):
             if controller in options and controller not in found:

@@ -7,17 +7,19 @@ files in one data folder (`--data`, `ASIBOT_DATA`, or the XDG data folder).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import os
 import socket
 import threading
 from pathlib import Path
+from typing import Iterator
 
 import uvicorn
 
 from asibot import local_http, runtime
 from asibot.bus import Bus
-from asibot.web import lan as lan_access
+from asibot.web import guard, lan as lan_access
 from asibot.web.app import Web, create_app
 from asibot.web.cameras import Cameras
 from asibot.web.fleet import Fleet
@@ -50,6 +52,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--new-token", action="store_true", help="with --lan: replace the access token")
 
 
+class _Server(uvicorn.Server):
+    """uvicorn without its signal handlers: the runtime owns SIGTERM and SIGINT, and its stop
+    event ends the server (`WebService.run`)."""
+
+    @contextlib.contextmanager
+    def capture_signals(self) -> Iterator[None]:
+        yield
+
+
 class WebService(runtime.Service):
     def __init__(self, bus: Bus, host: str, port: int, data: UserData, *, lan: bool = False,
                  new_token: bool = False) -> None:
@@ -70,7 +81,7 @@ class WebService(runtime.Service):
         self.web = Web(fleet=self.fleet, motion=motion, data=data, runner=runner, live=live,
                        cameras=Cameras(bus), tasks=tasks, voice=VoiceRelay(bus, live.send),
                        callers=local_http.Callers(n for n in names if n not in ("0.0.0.0", "::")))
-        self.app = create_app(self.web)
+        self.app: guard.PageGuard | lan_access.TokenGate = create_app(self.web)
         tls: dict = {}
         if lan:
             folder = data.root / ".lan"
@@ -87,10 +98,8 @@ class WebService(runtime.Service):
             else:
                 log.info("web on the LAN: https://%s:%d/ needs the token printed when it was made "
                          "(--new-token makes another)", where[0], port)
-        self.server = uvicorn.Server(uvicorn.Config(self.app, host=host, port=port, log_level="warning",
-                                                    ws_ping_interval=5.0, ws_ping_timeout=5.0, **tls))
-        # uvicorn installs its own signal handlers in run(); the runtime owns the signals.
-        self.server.install_signal_handlers = lambda: None  # type: ignore[method-assign]
+        self.server = _Server(uvicorn.Config(self.app, host=host, port=port, log_level="warning",
+                                             ws_ping_interval=5.0, ws_ping_timeout=5.0, **tls))
 
     def _ended(self, result: RunResult) -> None:
         self.web.live.send({"type": "run", "status": self.web.runner.status()})
@@ -101,8 +110,11 @@ class WebService(runtime.Service):
                 "url": f"{self.scheme}://{self.host}:{self.port}/"}
 
     def run(self, stop: threading.Event) -> None:
-        threading.Thread(target=lambda: (stop.wait(), setattr(self.server, "should_exit", True)),
-                         daemon=True, name="web-stop").start()
+        def stop_server() -> None:
+            stop.wait()
+            self.server.should_exit = True
+
+        threading.Thread(target=stop_server, daemon=True, name="web-stop").start()
         log.info("web: %s://%s:%d/ (user files in %s)", self.scheme, self.host, self.port, self.web.data.root)
         self.server.run()
         if not stop.is_set() and not self.server.should_exit:

@@ -14,7 +14,7 @@ import logging
 from typing import Callable
 
 from asibot import keys
-from asibot.bus import Bus
+from asibot.bus import Bus, Publisher
 from asibot.errors import RpcError, arguments as _only, quote
 from asibot.messages import Event
 from asibot.web.runner import ProgramRunner, RunResult
@@ -31,7 +31,7 @@ class TaskDesk:
 
     def __init__(self, bus: Bus, data: UserData, runner: ProgramRunner, is_live: Callable[[str], bool]) -> None:
         self.bus, self.data, self.runner, self.is_live = bus, data, runner, is_live
-        self._events: dict[str, object] = {}
+        self._events: dict[str, Publisher[Event]] = {}
         for verb in keys.RPC_VERBS_TASKS:
             bus.serve(keys.tasks_rpc(verb), getattr(self, f"_rpc_{verb}"))
 

@@ -35,7 +35,7 @@ import zlib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Callable, ParamSpec, TypeVar
+from typing import Callable, Concatenate, ParamSpec, TypeVar
 
 from asibot.files import data_dir, fsync_dir, remove_leftovers, write_atomic
 from asibot.web import naming
@@ -315,14 +315,15 @@ def _task_text(program: str, words: list[str], icon: str) -> bytes:
 
 P = ParamSpec("P")
 R = TypeVar("R")
+D = TypeVar("D", bound="UserData")
 
 
-def _locked(method: Callable[P, R]) -> Callable[P, R]:
+def _locked(method: Callable[Concatenate[D, P], R]) -> Callable[Concatenate[D, P], R]:
     """One lock for the whole folder: the web server calls from several threads."""
     @functools.wraps(method)
-    def wrapper(*args: P.args, **kwargs: P.kwargs) -> R:
-        with args[0]._lock:  # type: ignore[attr-defined]
-            return method(*args, **kwargs)
+    def wrapper(self: D, *args: P.args, **kwargs: P.kwargs) -> R:
+        with self._lock:
+            return method(self, *args, **kwargs)
     return wrapper
 
 
