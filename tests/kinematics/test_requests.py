@@ -22,7 +22,7 @@ from asibot.testing import wait_until
 from .conftest import START, quiet
 
 #: Verbs that move the arm when accepted.
-MOTION = ("movj", "movl", "movv", "movjv", "relj", "home", "pointer")
+MOTION = ("movj", "movl", "movv", "movjv", "relj", "home", "pointer", "jog")
 #: Longest sentence a refusal may carry (the bus cuts at 400 characters plus "...").
 MAX_REPLY_MESSAGE = 500
 #: The reply may take this long at most (act waits for the fingers), s.
@@ -140,6 +140,8 @@ def shaped(check):
         return numbers
     if isinstance(check, requests.OneOf):
         return st.sampled_from(check.choices)
+    if isinstance(check, requests.Whole):
+        return st.integers(check.lo - 1, check.hi + 1)
     return st.booleans()
 
 

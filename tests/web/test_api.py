@@ -16,6 +16,7 @@ from asibot import messages as m
 from asibot.bus import Bus
 from asibot.messages import EStop
 from asibot.testing import wait_until, release
+from asibot.web.motion import Motion
 
 from .conftest import API_ROBOT as ROBOT, API_START as START, settle
 
@@ -69,6 +70,31 @@ def test_steps_touched_while_moving_add_up(web, api):
         assert api.post(f"/api/robots/{ROBOT}/step", json={"space": "joint", "axis": 0, "direction": -1, "level": 2}).status_code == 200
     wait_until(lambda: server.ctl.state == "not_controlling", timeout=20)
     wait_until(lambda: abs(server.ctl.q[0] - before[0] + math.radians(15)) < 1e-3, timeout=5)
+
+
+class CallLog:
+    """A bus that answers every call at once and keeps what was asked."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[str, dict]] = []
+
+    def call(self, key: str, request: dict | None = None, timeout: float = 2.0) -> dict:
+        self.calls.append((key, request or {}))
+        return {"duration": 0.5}
+
+
+def test_a_step_is_one_jog_request_and_the_page_keeps_no_target():
+    """The kinematics service adds a step to the previous one's target (its `jog` verb), so a
+    click is one request, with the page's step sizes and level, and nothing to remember here."""
+    bus = CallLog()
+    motion = Motion(bus)
+    motion.step_joint(ROBOT, 1, -1, 2)
+    motion.step_axis(ROBOT, 3, 1, 5)
+    motion.step_axis(ROBOT, 0, -1, 1, step=0.02)
+    jog = keys.cart_rpc(ROBOT, "jog")
+    assert bus.calls == [(jog, {"axis": "q2", "step": -5.0, "level": 2}),
+                         (jog, {"axis": "rot(y')", "step": 15.0, "level": 5}),
+                         (jog, {"axis": "x", "step": -0.02, "level": 1})]
 
 
 def test_capture_reads_the_arm_and_suggests_names(web, api):

@@ -105,7 +105,8 @@ _OPERATOR = [
                          names=("*",)) + _SERVED_BY_OPERATORS),
 ]
 #: The verbs `asibot.client` calls (CartesianClient, NavClient): what a user's program needs.
-#: Not `pointer` (the page's handheld pointer), not nav's settings, maps on disk or localize.
+#: Not `pointer` (the page's handheld pointer) nor `jog` (its step buttons), not nav's settings,
+#: maps on disk or localize.
 PROGRAM_CART_VERBS = ("stat", "inv", "fwd", "movj", "movl", "movv", "movjv", "relj", "stop", "wait",
                       "tool", "act", "home")
 PROGRAM_NAV_VERBS = ("goto", "cancel", "result", "status", "places", "save_place", "rename_place",

@@ -14,7 +14,7 @@ _NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]*$")
 
 RPC_VERBS_CART = (
     "stat", "inv", "fwd", "movj", "movl", "movv", "movjv", "relj", "stop", "wait", "tool", "act",
-    "home", "pointer",
+    "home", "pointer", "jog",
 )
 RPC_VERBS_NAV = ("goto", "cancel", "result", "status", "places", "save_place", "rename_place", "remove_place",
                  "save_position", "recall_position", "drive", "turn", "primitive", "settings", "set_pose",

@@ -26,6 +26,13 @@ cleared or the driver back, a stream of requests (movv, movjv, pointer) that was
 arriving moves nothing ("busy", with a sentence) until it pauses for a watchdog period or is
 restarted; a movj or movl is a new request and moves. A `stop` does not re-arm: a jog
 button pressed again at once after its stop moves at once.
+
+Jog steps (the server's `jog`) are a movj or movl that carries its target (`Planned.jog`).
+While one runs, `jog_from` answers that target, so that the next step adds to it and not to
+where the arm happens to be; the target lives and dies with its motion: its end, a stop, the
+estop, a fault or the driver's loss forget it, and a motion of another verb has none. The next
+step checks itself first (`check_joint_limits`, `check_line`) and only then stops the running
+one, so that a step refused changes nothing.
 """
 
 from __future__ import annotations
@@ -73,6 +80,9 @@ class Planned:
     state: str                  # MOVJ or MOVL
     plan: trajectory.JointPlan
     ticket: int                 # the controller's epoch at the snapshot
+    #: A jog step's target (SI: the joints of a movj, the pose of a movl), which the next step
+    #: adds to while this motion runs; None for any other motion.
+    jog: np.ndarray | None = None
 
 
 @dataclass
@@ -104,6 +114,7 @@ class Controller:
         self.estop_reason = ""
         self.outcome: RpcError | None = None   # why the last motion ended early, None if it completed
         self._plan: trajectory.JointPlan | None = None
+        self._jog: np.ndarray | None = None     # the running motion's Planned.jog
         self._t0 = 0.0
         self._hold: np.ndarray | None = None
         self._stream_pose: np.ndarray | None = None
@@ -189,16 +200,21 @@ class Controller:
                 self._abort(None)
             return q0, self._epoch
 
-    def plan_movj(self, q_target: np.ndarray, *, duration: float | None = None,
-                  speed: float | None = None) -> Planned:
-        """Plan an isochronous joint move from the measured joints (the lock is held only for
-        the snapshot); `start` begins it."""
+    def check_joint_limits(self, q_target: np.ndarray) -> None:
+        """Refuse ("joint_limit") joints (rad) outside their limits, naming the first."""
         q1 = np.asarray(q_target, float)
         bad = np.flatnonzero(~((q1 >= self.lower) & (q1 <= self.upper)))
         if bad.size:
             j = int(bad[0])
             raise RpcError("joint_limit", f"Joint {j + 1} target {np.degrees(q1[j]):.1f} deg is outside its limits "
                                           f"{np.degrees(self.lower[j]):.0f}..{np.degrees(self.upper[j]):.0f} deg.")
+
+    def plan_movj(self, q_target: np.ndarray, *, duration: float | None = None,
+                  speed: float | None = None) -> Planned:
+        """Plan an isochronous joint move from the measured joints (the lock is held only for
+        the snapshot); `start` begins it."""
+        q1 = np.asarray(q_target, float)
+        self.check_joint_limits(q1)
         q0, ticket = self._snapshot()
         return Planned(MOVJ, trajectory.plan_movj(q0, q1, self.vmax, duration=duration, speed=speed), ticket)
 
@@ -207,11 +223,35 @@ class Controller:
         """Plan a straight line from the measured joints to an SI pose, checking the whole
         path, without holding the lock (only for the snapshot); `start` begins it."""
         q0, ticket = self._snapshot()
+        return Planned(MOVL, self._line(q0, pose_target, duration, speed, describe), ticket)
+
+    def check_line(self, pose_target: np.ndarray, *, speed: float | None = None, describe: Any = None) -> None:
+        """Refuse what plan_movl would refuse for a line from where the arm is now to an SI
+        pose, without stopping the motion that runs: a jog step checks its line before it stops
+        the step it follows, so that a step refused leaves that one running."""
+        with self._lock:
+            q0 = self.check_can_move()
+        self._line(q0, pose_target, None, speed, describe)
+
+    def _line(self, q0: np.ndarray, pose_target: np.ndarray, duration: float | None, speed: float | None,
+              describe: Any) -> trajectory.JointPlan:
+        """The straight line from the joints q0 to an SI pose, checked end to end (no lock)."""
         p0 = np.asarray(self.model.fwd(q0), float)
         kw = {"describe": describe} if describe else {}
-        plan = trajectory.plan_movl(self.model, q0, p0, pose_target, self.lower, self.upper, self.vmax,
+        return trajectory.plan_movl(self.model, q0, p0, pose_target, self.lower, self.upper, self.vmax,
                                     duration=duration, speed=speed, **kw)
-        return Planned(MOVL, plan, ticket)
+
+    def jog_from(self, state: str) -> tuple[np.ndarray, bool]:
+        """Where the next jog step of kind `state` (MOVJ: joints, MOVL: a pose; SI) starts, and
+        whether a planned motion runs (the step stops it first). While a jog step of the same
+        kind runs: its target, so that steps touched while the arm moves add up and the arm
+        does not stop short; otherwise where the arm is measured. Refuses what cannot move now."""
+        with self._lock:
+            q = self.check_can_move()
+            running = self.state in (MOVJ, MOVL)
+            if running and self.state == state and self._jog is not None:
+                return self._jog.copy(), True
+        return (q if state == MOVJ else np.asarray(self.model.fwd(q), float)), running
 
     def start(self, planned: Planned, now: float) -> float:
         """Begin a planned motion at time `now` (read it after planning); returns its duration.
@@ -224,7 +264,7 @@ class Controller:
                 why = self._interrupt
                 raise RpcError(why.code, f"{why.message} came while this {planned.state} was being planned, "
                                          "so it was not started; nothing moved.")
-            self._start(planned.state, planned.plan, now)
+            self._start(planned.state, planned.plan, now, planned.jog)
             return planned.plan.duration
 
     def stream(self, velocity: np.ndarray, now: float, mode: str = MOVV) -> None:
@@ -348,14 +388,15 @@ class Controller:
         self._bump(RpcError(why.code if why is not None else "busy", what))
         self._abort(why)
 
-    def _start(self, state: str, plan: trajectory.JointPlan, now: float) -> None:
+    def _start(self, state: str, plan: trajectory.JointPlan, now: float, jog: np.ndarray | None) -> None:
         self._bump(RpcError("busy", f"A {state}"))
         self.outcome = None
         self._plan, self._t0, self.state = plan, now, state
+        self._jog = None if jog is None else np.array(jog, float)   # a copy: the caller keeps its own
         self._hold = plan.q_at(plan.duration)
 
     def _finish(self, q: np.ndarray) -> None:
-        self._plan, self._hold, self.state = None, q, NOT_CONTROLLING
+        self._plan, self._jog, self._hold, self.state = None, None, q, NOT_CONTROLLING
         self._done.notify_all()
 
     def _abort(self, why: RpcError | None) -> None:
@@ -365,7 +406,7 @@ class Controller:
             self._hold = self.q.copy()
         self.outcome = why
         self._send_hold = True
-        self._plan, self.state = None, NOT_CONTROLLING
+        self._plan, self._jog, self.state = None, None, NOT_CONTROLLING
         self._done.notify_all()
 
     def hold_reference(self) -> Reference | None:

@@ -24,13 +24,16 @@ from typing import Any, Mapping, TypeGuard
 
 import numpy as np
 
+from asibot import jog
 from asibot.errors import RpcError, quote
 
 #: Largest coordinate of a point, m: far beyond any arm, small enough to square.
 MAX_DISTANCE = 1e6
 #: Largest angle of a point (rot(y'), rot(z'')), deg: one turn either way.
 MAX_POINT_ANGLE = 360.0
-#: Largest joint value or joint step (fwd, movj joints, relj), deg: two turns either way.
+#: Largest joint value or joint step (fwd, movj joints, relj, jog), deg: two turns either way.
+#: A jog step of x, y or z takes the same number in m: far beyond any arm, refused by the reach
+#: check of the step's end point.
 MAX_JOINT = 720.0
 #: Longest movement a request may ask for, s.
 MAX_DURATION = 600.0
@@ -175,7 +178,24 @@ class Flag:
         return value
 
 
-Validator = Number | Numbers | OneOf | Flag
+@dataclass(frozen=True)
+class Whole:
+    """A whole number in [lo, hi]: an int, not a float (a level is counted, not measured) nor a
+    bool (JSON's `true` is not the number 1 here)."""
+
+    lo: int
+    hi: int
+
+    def describe(self) -> str:
+        return f"a whole number from {self.lo} to {self.hi}"
+
+    def __call__(self, value: object) -> int:
+        if not isinstance(value, int) or isinstance(value, bool) or not self.lo <= value <= self.hi:
+            raise Invalid()
+        return value
+
+
+Validator = Number | Numbers | OneOf | Flag | Whole
 
 
 @dataclass(frozen=True)
@@ -282,4 +302,9 @@ def verbs(n_joints: int) -> dict[str, Verb]:
         "tool": Verb({"tool": Field(tool, also="or null to remove it")}),
         "act": Verb({"action": Field(OneOf(("open", "close")), required=True)}),
         "pointer": POINTER,
+        # One step of one axis (the page's step buttons): a joint (movj) or a coordinate of the
+        # point (movl) by a signed step, at one of the page's speed levels.
+        "jog": Verb({"axis": Field(OneOf(jog.axes(n_joints)), required=True),
+                     "step": Field(Number(-MAX_JOINT, MAX_JOINT, "deg (m for x, y, z)"), required=True),
+                     "level": Field(Whole(1, len(jog.SPEED_LEVELS)), required=True)}, needs_driver=True),
     }

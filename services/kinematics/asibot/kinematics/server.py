@@ -8,7 +8,9 @@ Controller and the bus messages are SI only.
 Every request is checked by one table, asibot.kinematics.requests: the server serves exactly
 its verbs, and each handler receives the checked arguments (a namespace), never the raw map.
 A movj or movl is planned without holding the controller (see asibot.kinematics.controller),
-so `stop`, `stat` and cart/state are answered while a long path is checked.
+so `stop`, `stat` and cart/state are answered while a long path is checked. A `jog` step is a
+movj or movl whose target the controller keeps while it runs, so that steps touched in a row
+add up here, in the service that moves the arm, whoever sends them.
 
 The server is the controller of the arm and gripper of its robot (asibot.safety.ownership): it
 announces itself with a new identity at every start, and every command it sends carries it.
@@ -18,6 +20,7 @@ meanwhile learns it.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 import time
@@ -26,6 +29,7 @@ from typing import Any, Callable
 import numpy as np
 
 from asibot import keys
+from asibot.jog import SPEED_LEVELS, STEP_LINEAR_SPEED, axes as jog_axes
 from asibot.safety import ownership
 from asibot.errors import RpcError
 from asibot.safety.estop import EStopState
@@ -34,7 +38,7 @@ from asibot.runtime import Service
 from asibot.timing import Ticker
 
 from . import requests
-from .controller import MOVJV, MOVV, POINTER, Controller
+from .controller import MOVJ, MOVJV, MOVL, MOVV, POINTER, Controller
 from .pointer import PointerInput, pointer_velocity
 from .requests import MAX_WAIT
 
@@ -73,6 +77,10 @@ class KinematicsServer(Service):
         self.me = ownership.Controller(robot, "arm", "kinematics")
         self.controller = self.me.id
         self.n = len(spec.joint_names)
+        #: The names of the jog's axes: the n joints, then the point's coordinates.
+        self._jog_axes = jog_axes(self.n)
+        #: One jog step at a time: each adds to the target of the one before.
+        self._jog_lock = threading.Lock()
         self._stop = threading.Event()
         self.ticker = Ticker(rate, stop=self._stop)
         self.cmd_pub = bus.publisher(keys.arm_command(robot), ArmCommand, express=True)  # no batching: latency
@@ -233,6 +241,45 @@ class KinematicsServer(Service):
         self.ctl.stream(pointer_velocity(pose, cmd), self.clock(), POINTER)
         self._send()
         return {"state": self.ctl.state}
+
+    def jog(self, a: Any) -> dict:
+        """One jog step (the page's step buttons): `axis` (a joint q1 ... or a coordinate of
+        the point) moves by the signed `step` (deg; m for x, y, z) at speed `level`: a movj at
+        that fraction of the joints' speeds, or a movl at that fraction of STEP_LINEAR_SPEED.
+
+        Steps add up: a step touched while the previous one still moves goes on from that
+        step's target, not from where the arm is (the arm does not stop short), as a pendant's
+        jog buttons do; after the end of a step, a stop, the estop or a motion of another verb
+        it starts where the arm is. The running motion is stopped and the step starts from
+        there, as a movj or movl would after a stop. A step refused (a limit, out of reach, a
+        line through a singularity) answers the same sentence as that movj or movl and changes
+        nothing: it is checked before the running step is stopped, which goes on to its target.
+        Replies the duration and the step's target: `joints` (deg) or `point`."""
+        i = self._jog_axes.index(a.axis)
+        joint = i < self.n
+        fraction = SPEED_LEVELS[a.level - 1]
+        with self._jog_lock:
+            base, running = self.ctl.jog_from(MOVJ if joint else MOVL)
+            # The step is added in the user's units, as the page shows the axis.
+            if joint:
+                user = np.degrees(base)
+                user[i] += a.step
+                target, speed = np.radians(user), fraction
+            else:
+                user = np.asarray(self._point_out(base), float)
+                user[i - self.n] += a.step
+                target, speed = self._point_in(user), STEP_LINEAR_SPEED * fraction
+            if running:
+                if joint:
+                    self.ctl.check_joint_limits(target)
+                else:
+                    self.ctl.check_line(target, speed=speed, describe=self._describe)
+                self.ctl.stop()      # plan_movj/plan_movl refuse "busy" while a motion runs
+                self._send()
+            planned = (self.ctl.plan_movj(target, speed=speed) if joint
+                       else self.ctl.plan_movl(target, speed=speed, describe=self._describe))
+            reply = self._start(dataclasses.replace(planned, jog=target))
+        return {**reply, ("joints" if joint else "point"): user.tolist()}
 
     def stop(self, a: Any) -> dict:
         self.ctl.stop()

@@ -19,7 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, Stri
 from asibot import robots
 from asibot.errors import RpcError
 from asibot.web.cameras import BOUNDARY, mjpeg
-from asibot.web.motion import SPEED_LEVELS
+from asibot.jog import SPEED_LEVELS
 
 router = APIRouter(prefix="/api")
 

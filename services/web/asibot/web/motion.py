@@ -4,12 +4,13 @@ Every motion goes through the robot's kinematics service (its RPC verbs), exactl
 program's `CartesianClient` does, so the web page has no privileges a program lacks and the
 controller's checks (limits, reach, estop, the 200 ms watchdog of streamed velocities) apply
 to it too. Refusals come back as `RpcError` with the controller's sentence for the page.
+A jog step is one `jog` request: the kinematics service keeps the previous step's target, so
+steps touched in a row add up there, and this module keeps no state of the arm.
 """
 
 from __future__ import annotations
 
 import math
-import threading
 from dataclasses import dataclass
 from typing import Any, Sequence
 
@@ -17,17 +18,15 @@ from asibot.safety import estop
 from asibot import keys, robots
 from asibot.bus import Bus
 from asibot.errors import RpcError
+# The speed levels and a Cartesian step's speed are the kinematics `jog` verb's too.
+from asibot.jog import SPEED_LEVELS, STEP_LINEAR_SPEED, axes as jog_axes
 from asibot.safety.estop import who
 from asibot.safety.identity import Identity
 from asibot.poses import POINT_AXES
 from asibot.web.pointer import DeviceReading, PointerMapping
 
-#: The five speed levels of the jog buttons, as fractions of the jog speeds below.
-SPEED_LEVELS = (0.1, 0.25, 0.5, 0.75, 1.0)
 #: Hold-to-move speeds at the top level: linear m/s, angular deg/s, joint deg/s.
 HOLD_LINEAR, HOLD_ANGULAR, HOLD_JOINT = 0.10, 20.0, 20.0
-#: A step of a movl at the top level moves at this linear speed, m/s.
-STEP_LINEAR_SPEED = 0.10
 #: The seed's jog steps (WebResponder.hpp): 5 deg a joint, 0.10 m and 15 deg a Cartesian axis.
 JOINT_STEP, LINEAR_STEP, ANGULAR_STEP = 5.0, 0.10, 15.0
 #: Longest RPC wait for a quick verb, s.
@@ -70,7 +69,9 @@ def _direction(direction: int) -> int:
 
 
 class Motion:
-    """The robot actions of the web page, each one bus call (or two) to the kinematics service."""
+    """The robot actions of the web page, each one bus call (or two) to the kinematics service.
+    It keeps no state of any robot: what must be remembered between calls, the kinematics
+    service remembers."""
 
     def __init__(self, bus: Bus, settings: JogSettings = JogSettings(), who: str = "web page",
                  pointer: PointerMapping | None = None) -> None:
@@ -79,8 +80,6 @@ class Motion:
         self.pointer = pointer or PointerMapping()
         self.who = who
         self.me = Identity("web")      # signs the page's estops and releases (asibot.safety.estop)
-        self._lock = threading.Lock()
-        self._steps: dict[str, tuple[str, list[float]]] = {}   # robot -> the last step's target
 
     def _call(self, robot: str, verb: str, timeout: float = CALL_TIMEOUT, **request: Any) -> dict:
         return self.bus.call(keys.cart_rpc(robot, verb), request, timeout=timeout)
@@ -93,47 +92,27 @@ class Motion:
 
     # --- jogging --------------------------------------------------------------------------
     def step_joint(self, robot: str, joint: int, direction: int, level: int, step: float | None = None) -> dict:
-        """Move one joint (0 for the first) by one step, deg."""
+        """Move one joint (0 for the first) by one step, deg: one `jog` of the kinematics
+        service, which adds it to the previous step's target while that one still moves."""
         n = self._joints(robot)
-        if not isinstance(joint, int) or not 0 <= joint < n:
+        if not _whole(joint) or not 0 <= joint < n:
             raise RpcError("bad_request", f"The joint must be 0 to {n - 1} (this arm has {n}); got {joint!r}.")
         delta = _direction(direction) * (self.settings.joint_step if step is None else step)
-        speed = _level(level)
-
-        def then(target: list[float]) -> list[float]:
-            return [v + (delta if i == joint else 0.0) for i, v in enumerate(target)]
-        return self._step(robot, "joints", then, lambda q: self._call(robot, "movj", joints=q, speed=speed))
+        return self._jog(robot, jog_axes(n)[joint], delta, level)
 
     def step_axis(self, robot: str, axis: int, direction: int, level: int, step: float | None = None) -> dict:
-        """Move the tool one step along (or about) one axis of the point with a movl."""
-        if not isinstance(axis, int) or not 0 <= axis < len(POINT_AXES):
+        """Move the tool one step along (or about) one axis of the point: one `jog` of the
+        kinematics service (a movl), which adds it to the previous step's target while that
+        one still moves."""
+        if not _whole(axis) or not 0 <= axis < len(POINT_AXES):
             raise RpcError("bad_request", f"The axis must be 0 to {len(POINT_AXES) - 1} (x, y, z, rot(y'), rot(z'')); got {axis!r}.")
         if step is None:
             step = self.settings.linear_step if axis < 3 else self.settings.angular_step
-        delta, speed = _direction(direction) * step, STEP_LINEAR_SPEED * _level(level)
+        return self._jog(robot, POINT_AXES[axis][0], _direction(direction) * step, level)
 
-        def then(target: list[float]) -> list[float]:
-            return [v + (delta if i == axis else 0.0) for i, v in enumerate(target)]
-        return self._step(robot, "point", then, lambda p: self._call(robot, "movl", point=p, speed=speed))
-
-    def _step(self, robot: str, space: str, then: Any, start: Any) -> dict:
-        """Steps add up: a step touched while the previous one still moves goes on from that
-        step's target (the arm does not stop short), as jog buttons on a pendant do."""
-        with self._lock:
-            now = self._call(robot, "stat")
-            previous = self._steps.get(robot)
-            moving = now["state"] in ("movj", "movl")
-            base = previous[1] if moving and previous and previous[0] == space else now[space]
-            target = then(list(base))
-            if moving:
-                self._call(robot, "stop")
-            try:
-                reply = start(target)
-            except RpcError:
-                self._steps.pop(robot, None)
-                raise
-            self._steps[robot] = (space, target)
-            return reply
+    def _jog(self, robot: str, axis: str, step: float, level: int) -> dict:
+        """One step: the kinematics `jog` verb checks the step and the level and keeps the target."""
+        return self._call(robot, "jog", axis=axis, step=float(step), level=level)
 
     def hold_velocity(self, space: str, axis: int, direction: int, level: int, n_joints: int) -> list[float]:
         """The velocity one held jog button streams: one axis (or joint) at the level's speed."""
