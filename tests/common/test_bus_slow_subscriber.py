@@ -7,6 +7,7 @@ the same rule here: a full subscription drops its oldest waiting message, and no
 """
 
 import threading
+
 from asibot import keys, messages as m
 from asibot.bus import Bus
 from asibot.testing import wait_until

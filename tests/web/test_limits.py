@@ -12,8 +12,8 @@ import zipfile
 
 import pytest
 
-from asibot.web import userdata
 from asibot.web.userdata import UserData, UserDataError
+from asibot.web.userdata import folder as user_folder   # its limits
 
 from .conftest import API_ROBOT, settle
 
@@ -21,7 +21,7 @@ PNG = b"\x89PNG\r\n\x1a\n" + b"\0" * 64
 
 
 def test_the_folder_keeps_a_bounded_number_of_programs(tmp_path, monkeypatch):
-    monkeypatch.setattr(userdata, "MAX_PROGRAMS", 3)
+    monkeypatch.setattr(user_folder, "MAX_PROGRAMS", 3)
     data = UserData(tmp_path)
     for n in range(3):
         data.save_program(f"p{n}", "print(1)\n")
@@ -34,7 +34,7 @@ def test_the_folder_keeps_a_bounded_number_of_programs(tmp_path, monkeypatch):
 
 
 def test_the_folder_keeps_a_bounded_number_of_bytes(tmp_path, monkeypatch):
-    monkeypatch.setattr(userdata, "MAX_STORED_BYTES", 1000)
+    monkeypatch.setattr(user_folder, "MAX_STORED_BYTES", 1000)
     data = UserData(tmp_path)
     data.save_program("small", "x = 1\n" * 100)              # 600 bytes
     with pytest.raises(UserDataError, match="past 0 MiB|Delete programs or icons"):
@@ -48,7 +48,7 @@ def test_the_folder_keeps_a_bounded_number_of_bytes(tmp_path, monkeypatch):
 
 def test_an_import_stops_at_the_folders_limits(tmp_path, monkeypatch):
     """The attack: one small zip of many large, compressible programs filled the disk."""
-    monkeypatch.setattr(userdata, "MAX_PROGRAMS", 5)
+    monkeypatch.setattr(user_folder, "MAX_PROGRAMS", 5)
     archive = io.BytesIO()
     with zipfile.ZipFile(archive, "w", zipfile.ZIP_DEFLATED) as z:
         for n in range(250):
@@ -60,7 +60,7 @@ def test_an_import_stops_at_the_folders_limits(tmp_path, monkeypatch):
 
 
 def test_icons_are_bounded_too(tmp_path, monkeypatch):
-    monkeypatch.setattr(userdata, "MAX_ICONS", 2)
+    monkeypatch.setattr(user_folder, "MAX_ICONS", 2)
     data = UserData(tmp_path)
     data.add_icon("a.png", PNG + b"a")
     data.add_icon("b.png", PNG + b"b")

@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from asibot.web import userdata
-from asibot.web.userdata import AlreadyExists, NotFound, UserData, UserDataError
+from asibot.web.userdata import AlreadyExists, NotFound, UserData, UserDataError, seed
 
 
 def png(width: int = 1, height: int = 1) -> bytes:
@@ -517,10 +517,10 @@ def test_zip_bombs_are_refused(data, monkeypatch):
     # An honest but too big entry is skipped unread; many entries or a huge total refuse the zip.
     report = data.import_zip(bomb)
     assert [s.item for s in report.skipped] == ["bomb.py"] and data.programs() == []
-    monkeypatch.setattr(userdata, "MAX_ZIP_ENTRIES", 3)
+    monkeypatch.setattr(seed, "MAX_ZIP_ENTRIES", 3)
     refused(data, UserDataError, data.import_zip, zip_of({f"p{n}.py": b"pass\n" for n in range(4)}))
-    monkeypatch.setattr(userdata, "MAX_ZIP_ENTRIES", 2000)
-    monkeypatch.setattr(userdata, "MAX_ZIP_TOTAL", 100_000)
+    monkeypatch.setattr(seed, "MAX_ZIP_ENTRIES", 2000)
+    monkeypatch.setattr(seed, "MAX_ZIP_TOTAL", 100_000)
     refused(data, UserDataError, data.import_zip, zip_of({f"p{n}.py": b"#" * 60_000 + b"\n" for n in range(2)}))
     refused(data, UserDataError, data.import_zip, b"not a zip")
 

@@ -14,7 +14,8 @@ from pydantic import Field, StrictBool, StrictStr
 from asibot import keys
 from asibot.errors import RpcError
 from asibot.nav.primitives import PRIMITIVES
-from asibot.web.api_robots import Number, RobotId, Strict, _known, _run, _web
+from asibot.web.models import Number, RobotId, Strict
+from asibot.web.routing import known, off_loop, web_of
 
 router = APIRouter(prefix="/api/base")
 
@@ -68,15 +69,15 @@ def config() -> dict:
 
 
 def _nav(request: Request, robot: str, verb: str, **body: object) -> dict:
-    web = _web(request)
-    _known(web, robot)
+    web = web_of(request)
+    known(web, robot)
     return web.motion.bus.call(keys.nav_rpc(robot, verb), {k: v for k, v in body.items() if v is not None},
                                timeout=NAV_TIMEOUT)
 
 
 @router.get("/{robot}/map", summary="the robot's navigation map (occupancy grid)")
 def nav_map(robot: RobotId, request: Request) -> dict:
-    found = _web(request).fleet.map(robot)
+    found = web_of(request).fleet.map(robot)
     if found is None:
         raise RpcError("unavailable", f"No map from the nav service of {robot!r} yet; is it running "
                                       f"(`asibot up` starts it in the simulation)?")
@@ -87,16 +88,16 @@ def nav_map(robot: RobotId, request: Request) -> dict:
 async def goto(robot: RobotId, body: Goal, request: Request) -> dict:
     x, y = body.x, body.y
     if body.place is not None and (x is None or y is None):
-        return await _run(_nav, request, robot, "goto", place=body.place)
+        return await off_loop(_nav, request, robot, "goto", place=body.place)
     if body.place is not None or x is None or y is None:
         raise RpcError("bad_request", "Say where to go: a place, or a point x and y (m) of the map, not both.")
     theta = math.radians(body.theta_deg) if body.theta_deg is not None else _facing(request, robot, x, y)
-    return await _run(_nav, request, robot, "goto", pose=[float(x), float(y), theta])
+    return await off_loop(_nav, request, robot, "goto", pose=[float(x), float(y), theta])
 
 
 def _facing(request: Request, robot: str, x: float, y: float) -> float:
     """The heading from where the robot is to (x, y): it arrives facing the way it came."""
-    nav = _web(request).fleet.view(_known(_web(request), robot)).get("nav") or {}
+    nav = web_of(request).fleet.view(known(web_of(request), robot)).get("nav") or {}
     pose = nav.get("pose")
     if not pose or math.hypot(x - pose["x"], y - pose["y"]) < 1e-3:
         return math.radians(pose["theta_deg"]) if pose else 0.0
@@ -105,34 +106,34 @@ def _facing(request: Request, robot: str, x: float, y: float) -> float:
 
 @router.post("/{robot}/cancel", summary="cancel the running goal")
 async def cancel(robot: RobotId, request: Request) -> dict:
-    return await _run(_nav, request, robot, "cancel")
+    return await off_loop(_nav, request, robot, "cancel")
 
 
 @router.post("/{robot}/drive", summary="one of the driving primitives, or stop")
 async def drive(robot: RobotId, body: Drive, request: Request) -> dict:
-    return await _run(_nav, request, robot, "primitive", name=body.name, continuous=body.continuous or None)
+    return await off_loop(_nav, request, robot, "primitive", name=body.name, continuous=body.continuous or None)
 
 
 @router.post("/{robot}/settings", summary="faster, slower, wider or narrower")
 async def settings(robot: RobotId, body: Change, request: Request) -> dict:
-    return await _run(_nav, request, robot, "settings", change=body.change)
+    return await off_loop(_nav, request, robot, "settings", change=body.change)
 
 
 @router.get("/{robot}/places", summary="the robot's named places")
 async def places(robot: RobotId, request: Request) -> dict:
-    return await _run(_nav, request, robot, "places")
+    return await off_loop(_nav, request, robot, "places")
 
 
 @router.post("/{robot}/places", summary="save a place where the robot stands")
 async def save_place(robot: RobotId, body: NewPlace, request: Request) -> dict:
-    return await _run(_nav, request, robot, "save_place", name=body.name, replace=body.replace or None)
+    return await off_loop(_nav, request, robot, "save_place", name=body.name, replace=body.replace or None)
 
 
 @router.post("/{robot}/places/{name}/rename", summary="rename a place")
 async def rename_place(robot: RobotId, name: str, body: Rename, request: Request) -> dict:
-    return await _run(_nav, request, robot, "rename_place", name=name, new_name=body.new_name)
+    return await off_loop(_nav, request, robot, "rename_place", name=name, new_name=body.new_name)
 
 
 @router.delete("/{robot}/places/{name}", summary="remove a place")
 async def remove_place(robot: RobotId, name: str, request: Request) -> dict:
-    return await _run(_nav, request, robot, "remove_place", name=name)
+    return await off_loop(_nav, request, robot, "remove_place", name=name)

@@ -7,16 +7,16 @@ fleet, so it works while the arm moves.
 
 from __future__ import annotations
 
-import asyncio
 import dataclasses
 from typing import Annotated, Literal
 
 from fastapi import APIRouter, File, Request, Response, UploadFile
 from fastapi.responses import FileResponse
-from pydantic import BaseModel, ConfigDict, Field, StrictInt, StrictStr
+from pydantic import Field, StrictInt, StrictStr
 
 from asibot.errors import RpcError
-from asibot.web.api_robots import Level, Number, RobotId, _known, _web
+from asibot.web.models import Level, Number, RobotId, Strict
+from asibot.web.routing import known, off_loop, web_of
 
 router = APIRouter(prefix="/api")
 
@@ -25,10 +25,6 @@ ICON_LIMIT = 2 * 1024 * 1024
 IMPORT_LIMIT = 20 * 1024 * 1024
 
 Name = Annotated[StrictStr, Field(min_length=1, max_length=200)]
-
-
-class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
 
 
 class Capture(Strict):
@@ -84,22 +80,22 @@ def _as_json(obj) -> dict:
 # --- points ------------------------------------------------------------------------------------
 @router.get("/points", summary="the taught points")
 def points(request: Request) -> dict:
-    data = _web(request).data
+    data = web_of(request).data
     return {"points": [_as_json(p) for p in data.points()], "suggested": data.suggest_point_name()}
 
 
 @router.get("/robots/{robot}/suggested-point-name",
             summary="the name a capture would take now: at a place, above or near a taught point, or point-N")
 def suggested_point_name(robot: RobotId, request: Request) -> dict:
-    web = _web(request)
-    _known(web, robot)
+    web = web_of(request)
+    known(web, robot)
     return {"name": web.data.suggest_point_name(web.fleet.point(robot), web.fleet.place(robot))}
 
 
 @router.post("/robots/{robot}/capture", summary="capture the arm's current point (works while it moves)")
 def capture(robot: RobotId, body: Capture, request: Request) -> dict:
-    web = _web(request)
-    _known(web, robot)
+    web = web_of(request)
+    known(web, robot)
     here = web.fleet.point(robot)
     if here is None:
         raise RpcError("unavailable", f"No position from {robot} yet: is its kinematics service running?")
@@ -109,73 +105,73 @@ def capture(robot: RobotId, body: Capture, request: Request) -> dict:
 
 @router.post("/points/{name}/rename", summary="rename a point")
 def rename_point(name: str, body: Rename, request: Request) -> dict:
-    return _as_json(_web(request).data.rename_point(name, body.name))
+    return _as_json(web_of(request).data.rename_point(name, body.name))
 
 
 @router.delete("/points/{name}", summary="delete a point")
 def delete_point(name: str, request: Request) -> dict:
-    _web(request).data.delete_point(name)
+    web_of(request).data.delete_point(name)
     return {}
 
 
 @router.post("/robots/{robot}/points/{name}/go", summary="move the arm to a taught point")
 async def go_to_point(robot: RobotId, name: str, body: GoTo, request: Request) -> dict:
-    web = _web(request)
-    _known(web, robot)
+    web = web_of(request)
+    known(web, robot)
     point = web.data.point(name)
-    return await asyncio.to_thread(web.motion.move, robot, body.kind, point.values, level=body.level)
+    return await off_loop(web.motion.move, robot, body.kind, point.values, level=body.level)
 
 
 # --- programs ----------------------------------------------------------------------------------
 @router.get("/programs", summary="the user's programs")
 def programs(request: Request) -> dict:
-    return {"programs": _web(request).data.programs()}
+    return {"programs": web_of(request).data.programs()}
 
 
 @router.post("/programs", summary="a new program from the template")
 def new_program(body: NewProgram, request: Request) -> dict:
-    return {"name": body.name, "text": _web(request).data.new_program(body.name)}
+    return {"name": body.name, "text": web_of(request).data.new_program(body.name)}
 
 
 @router.get("/programs/{name}", summary="a program's text")
 def read_program(name: str, request: Request) -> dict:
-    data = _web(request).data
+    data = web_of(request).data
     return {"name": name, "text": data.read_program(name),
             "versions": [_as_json(v) for v in data.versions(name)]}
 
 
 @router.put("/programs/{name}", summary="save a program (the previous version is kept)")
 def save_program(name: str, body: ProgramText, request: Request) -> dict:
-    data = _web(request).data
+    data = web_of(request).data
     data.save_program(name, body.text)
     return {"name": name, "problems": [_as_json(p) for p in data.check_program(body.text)]}
 
 
 @router.post("/programs/{name}/rename", summary="rename a program")
 def rename_program(name: str, body: Rename, request: Request) -> dict:
-    _web(request).data.rename_program(name, body.name)
+    web_of(request).data.rename_program(name, body.name)
     return {"name": body.name}
 
 
 @router.delete("/programs/{name}", summary="delete a program (kept in the trash)")
 def delete_program(name: str, request: Request) -> dict:
-    _web(request).data.delete_program(name)
+    web_of(request).data.delete_program(name)
     return {}
 
 
 @router.post("/check", summary="syntax check of a program's text")
 def check(body: ProgramText, request: Request) -> dict:
-    return {"problems": [_as_json(p) for p in _web(request).data.check_program(body.text)]}
+    return {"problems": [_as_json(p) for p in web_of(request).data.check_program(body.text)]}
 
 
 @router.post("/programs/{name}/versions/{version}/restore", summary="bring back a previous version")
 def restore(name: str, version: str, request: Request) -> dict:
-    return {"name": name, "text": _web(request).data.restore_version(name, version)}
+    return {"name": name, "text": web_of(request).data.restore_version(name, version)}
 
 
 # --- running -----------------------------------------------------------------------------------
 def _start(web, program: str, robot: str, minutes: int | None = None) -> dict:
-    _known(web, robot)
+    known(web, robot)
     path = web.data.program_file(program)
     try:
         web.runner.start(path, robot, name=program, wall_seconds=None if minutes is None else minutes * 60.0)
@@ -186,88 +182,88 @@ def _start(web, program: str, robot: str, minutes: int | None = None) -> dict:
 
 @router.post("/programs/{name}/run", summary="run a program on a robot, in its own process")
 def run_program(name: str, body: RunProgram, request: Request) -> dict:
-    return _start(_web(request), name, body.robot, body.minutes)
+    return _start(web_of(request), name, body.robot, body.minutes)
 
 
 @router.post("/run/stop", summary="stop the running program (and the arm)")
 async def stop_program(request: Request) -> dict:
-    web = _web(request)
-    await asyncio.to_thread(web.runner.stop)
+    web = web_of(request)
+    await off_loop(web.runner.stop)
     return web.runner.status()
 
 
 @router.get("/run", summary="the running (or last) program and its output")
 def run_status(request: Request) -> dict:
-    runner = _web(request).runner
+    runner = web_of(request).runner
     return {**runner.status(), "output": [list(o) for o in runner.output()]}
 
 
 # --- words -------------------------------------------------------------------------------------
 @router.get("/words", summary="the recorded words and phrases")
 def words(request: Request) -> dict:
-    return {"words": _web(request).data.words()}
+    return {"words": web_of(request).data.words()}
 
 
 @router.post("/words", summary="add a word or phrase")
 def add_word(body: Word, request: Request) -> dict:
-    return {"word": _web(request).data.add_word(body.text)}
+    return {"word": web_of(request).data.add_word(body.text)}
 
 
 @router.delete("/words/{text}", summary="delete a word or phrase")
 def delete_word(text: str, request: Request) -> dict:
-    _web(request).data.delete_word(text)
+    web_of(request).data.delete_word(text)
     return {}
 
 
 @router.post("/voice/learn", summary="learn how the user says a word: from what the page's microphone hears next")
 def learn_word(body: Learn, request: Request) -> dict:
-    return _web(request).voice.learn(body.word, body.page, body.seconds)
+    return web_of(request).voice.learn(body.word, body.page, body.seconds)
 
 
 @router.post("/voice/forget", summary="forget how the user says a word (the dictionary's pronunciation stays)")
 def forget_word(body: Word, request: Request) -> dict:
-    return _web(request).voice.forget(body.text)
+    return web_of(request).voice.forget(body.text)
 
 
 @router.get("/voice/learned", summary="the words learned by saying them, with their phones")
 def learned_words(request: Request) -> dict:
-    web = _web(request)
+    web = web_of(request)
     return web.voice.learned(web.data.words())
 
 
 # --- tasks -------------------------------------------------------------------------------------
 @router.get("/tasks", summary="the tasks the Launcher shows")
 def tasks(request: Request) -> dict:
-    return {"tasks": [_as_json(t) for t in _web(request).data.tasks()]}
+    return {"tasks": [_as_json(t) for t in web_of(request).data.tasks()]}
 
 
 @router.put("/tasks/{name}", summary="create or change a task: program + words + icon")
 def save_task(name: str, body: TaskBody, request: Request) -> dict:
-    return _as_json(_web(request).data.save_task(name, body.program, body.words, body.icon))
+    return _as_json(web_of(request).data.save_task(name, body.program, body.words, body.icon))
 
 
 @router.delete("/tasks/{name}", summary="delete a task")
 def delete_task(name: str, request: Request) -> dict:
-    _web(request).data.delete_task(name)
+    web_of(request).data.delete_task(name)
     return {}
 
 
 @router.post("/tasks/{name}/launch", summary="launch a task's program on a robot")
 def launch(name: str, body: Run, request: Request) -> dict:
-    web = _web(request)
-    web.tasks.launch(name, _known(web, body.robot))
+    web = web_of(request)
+    web.tasks.launch(name, known(web, body.robot))
     return web.runner.status()
 
 
 # --- icons -------------------------------------------------------------------------------------
 @router.get("/icons", summary="the icons a task can have")
 def icons(request: Request) -> dict:
-    return {"icons": [_as_json(i) for i in _web(request).data.icons()]}
+    return {"icons": [_as_json(i) for i in web_of(request).data.icons()]}
 
 
 @router.get("/icons/{name}", summary="one icon's image")
 def icon(name: str, request: Request) -> FileResponse:
-    path = _web(request).data.icon_file(name)
+    path = web_of(request).data.icon_file(name)
     # Uploaded images are served as images only, never sniffed into HTML.
     return FileResponse(path, headers={"X-Content-Type-Options": "nosniff",
                                        "Content-Security-Policy": "default-src 'none'; style-src 'unsafe-inline'"})
@@ -278,13 +274,13 @@ async def upload_icon(request: Request, file: UploadFile = File(...)) -> dict:
     data = await file.read(ICON_LIMIT + 1)
     if len(data) > ICON_LIMIT:
         raise RpcError("bad_request", f"An icon may be up to {ICON_LIMIT // (1024 * 1024)} MiB; this one is larger.")
-    return {"name": _web(request).data.add_icon(file.filename or "icon", data)}
+    return {"name": web_of(request).data.add_icon(file.filename or "icon", data)}
 
 
 # --- the seed's files --------------------------------------------------------------------------
 @router.get("/export.zip", summary="every user file in the seed's formats, as a zip")
 def export(request: Request) -> Response:
-    return Response(_web(request).data.export_zip(), media_type="application/zip",
+    return Response(web_of(request).data.export_zip(), media_type="application/zip",
                     headers={"Content-Disposition": 'attachment; filename="asibot-user-files.zip"'})
 
 
@@ -293,5 +289,5 @@ async def import_files(request: Request, file: UploadFile = File(...)) -> dict:
     data = await file.read(IMPORT_LIMIT + 1)
     if len(data) > IMPORT_LIMIT:
         raise RpcError("bad_request", f"An import may be up to {IMPORT_LIMIT // (1024 * 1024)} MiB; this one is larger.")
-    return _as_json(await asyncio.to_thread(_web(request).data.import_zip, data))
+    return _as_json(await off_loop(web_of(request).data.import_zip, data))
 

@@ -7,30 +7,20 @@ them at /docs), so the page never guesses a field or a unit.
 
 from __future__ import annotations
 
-import asyncio
+import threading
 from typing import Annotated, Literal
 
-import threading
-
-from fastapi import APIRouter, Path, Request
+from fastapi import APIRouter, Request
 from fastapi.responses import StreamingResponse
-from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt
+from pydantic import Field, StrictBool, StrictInt
 
 from asibot import robots
 from asibot.errors import RpcError
 from asibot.web.cameras import BOUNDARY, mjpeg
-from asibot.jog import SPEED_LEVELS
+from asibot.web.models import Level, Number, RobotId, Strict
+from asibot.web.routing import known, off_loop, web_of
 
 router = APIRouter(prefix="/api")
-
-RobotId = Annotated[str, Path(pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.\-]{0,63}$",
-                              description="a robot id as the Connection Manager lists it")]
-Level = Annotated[StrictInt, Field(ge=1, le=len(SPEED_LEVELS), description="speed level, 1 (slowest) to 5")]
-Number = StrictFloat | StrictInt
-
-
-class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
 
 
 class Step(Strict):
@@ -65,33 +55,15 @@ class Speed(Strict):
     level: Level = 3
 
 
-def _web(request: Request):
-    return request.app.state.web
-
-
-def _known(web, robot: str) -> str:
-    """The robot must be on the bus (a live driver or controller) for the page to command it."""
-    if robot not in web.fleet.ids():
-        live = ", ".join(web.fleet.ids()) or "none"
-        raise RpcError("unavailable", f"Robot {robot!r} is not connected (live robots: {live}). "
-                                      "Start it with `asibot up`, then choose it in the Connection Manager.")
-    return robot
-
-
-async def _run(fn, *args, **kwargs):
-    """Bus calls block for up to a few seconds: keep them off the event loop."""
-    return await asyncio.to_thread(fn, *args, **kwargs)
-
-
 @router.get("/robots", summary="every connected robot and its live state")
 def list_robots(request: Request) -> list[dict]:
-    return _web(request).fleet.views()
+    return web_of(request).fleet.views()
 
 
 @router.get("/robots/{robot}", summary="one robot's live state")
 def get_robot(robot: RobotId, request: Request) -> dict:
-    web = _web(request)
-    return web.fleet.view(_known(web, robot))
+    web = web_of(request)
+    return web.fleet.view(known(web, robot))
 
 
 @router.get("/robots/{robot}/model", summary="the robot's arm model for the 3D view")
@@ -106,87 +78,87 @@ def get_model(robot: RobotId, request: Request) -> dict:
 
 @router.post("/robots/{robot}/step", summary="jog one step")
 async def step(robot: RobotId, body: Step, request: Request) -> dict:
-    web = _web(request)
-    _known(web, robot)
+    web = web_of(request)
+    known(web, robot)
     if body.space == "joint":
-        return await _run(web.motion.step_joint, robot, body.axis, body.direction, body.level, body.step)
-    return await _run(web.motion.step_axis, robot, body.axis, body.direction, body.level, body.step)
+        return await off_loop(web.motion.step_joint, robot, body.axis, body.direction, body.level, body.step)
+    return await off_loop(web.motion.step_axis, robot, body.axis, body.direction, body.level, body.step)
 
 
 @router.post("/robots/{robot}/move", summary="movj or movl, absolute or relative")
 async def move(robot: RobotId, body: Move, request: Request) -> dict:
-    web = _web(request)
-    _known(web, robot)
-    return await _run(web.motion.move, robot, body.kind, body.values, relative=body.relative,
+    web = web_of(request)
+    known(web, robot)
+    return await off_loop(web.motion.move, robot, body.kind, body.values, relative=body.relative,
                       joints=body.joints, level=body.level)
 
 
 @router.post("/robots/{robot}/inv", summary="the joints that reach a point (nothing moves)")
 async def inverse(robot: RobotId, body: Target, request: Request) -> dict:
-    web = _web(request)
-    _known(web, robot)
-    joints = await _run(web.motion.inverse, robot, body.point)
+    web = web_of(request)
+    known(web, robot)
+    joints = await off_loop(web.motion.inverse, robot, body.point)
     return {"joints": joints, "names": robots.get(robot).joint_names}
 
 
 @router.post("/robots/{robot}/home", summary="go to the home position")
 async def home(robot: RobotId, body: Speed, request: Request) -> dict:
-    web = _web(request)
-    return await _run(web.motion.home, _known(web, robot), body.level)
+    web = web_of(request)
+    return await off_loop(web.motion.home, known(web, robot), body.level)
 
 
 @router.post("/robots/{robot}/stop", summary="stop the arm's motion")
 async def stop(robot: RobotId, request: Request) -> dict:
-    web = _web(request)
-    return await _run(web.motion.stop, _known(web, robot))
+    web = web_of(request)
+    return await off_loop(web.motion.stop, known(web, robot))
 
 
 @router.post("/robots/{robot}/gripper", summary="open or close the gripper")
 async def gripper(robot: RobotId, body: Grip, request: Request) -> dict:
-    web = _web(request)
-    return await _run(web.motion.grip, _known(web, robot), body.close)
+    web = web_of(request)
+    return await off_loop(web.motion.grip, known(web, robot), body.close)
 
 
 @router.post("/robots/{robot}/estop", summary="engage this robot's emergency stop")
 async def estop_one(robot: RobotId, request: Request) -> dict:
-    web = _web(request)
-    await _run(web.motion.estop, robot)
-    await _run(web.runner.stop, "stopped by the emergency stop")
+    web = web_of(request)
+    await off_loop(web.motion.estop, robot)
+    await off_loop(web.runner.stop, "stopped by the emergency stop")
     return {"engaged": True}
 
 
 @router.post("/estop", summary="emergency stop of every connected robot and the running program")
 async def estop_all(request: Request) -> dict:
-    web = _web(request)
+    web = web_of(request)
     stopped = web.fleet.ids()
     for robot in stopped:
-        await _run(web.motion.estop, robot)
-    await _run(web.runner.stop, "stopped by the emergency stop")
+        await off_loop(web.motion.estop, robot)
+    await off_loop(web.runner.stop, "stopped by the emergency stop")
     return {"robots": stopped}
 
 
 @router.post("/robots/{robot}/release", summary="release the emergency stop")
 async def release(robot: RobotId, request: Request) -> dict:
-    web = _web(request)
-    await _run(web.motion.release, _known(web, robot))
+    web = web_of(request)
+    await off_loop(web.motion.release, known(web, robot))
     return {"engaged": False}
 
 
 @router.post("/robots/{robot}/reset_fault", summary="ask the driver to clear a fault")
 async def reset_fault(robot: RobotId, request: Request) -> dict:
-    web = _web(request)
-    return await _run(web.motion.reset_fault, _known(web, robot))
+    web = web_of(request)
+    return await off_loop(web.motion.reset_fault, known(web, robot))
 
 
 @router.get("/robots/{robot}/cameras", summary="the robot's cameras that are sending images")
 def cameras(robot: RobotId, request: Request) -> dict:
-    return {"cameras": _web(request).cameras.names(robot)}
+    return {"cameras": web_of(request).cameras.names(robot)}
 
 
 @router.get("/robots/{robot}/cameras/{name}.mjpg", summary="a camera's images as an MJPEG stream")
 def camera_stream(robot: RobotId, name: str, request: Request) -> StreamingResponse:
     try:
-        frames = _web(request).cameras.frames(robot, name, threading.Event())
+        frames = web_of(request).cameras.frames(robot, name, threading.Event())
     except KeyError as exc:
         raise RpcError("unavailable", exc.args[0]) from None
     return StreamingResponse(mjpeg(frames), media_type=f"multipart/x-mixed-replace; boundary={BOUNDARY}",

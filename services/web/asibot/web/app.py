@@ -20,11 +20,11 @@ from typing import Any
 from fastapi import FastAPI, WebSocket, WebSocketDisconnect
 from fastapi.responses import HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
-from pydantic import BaseModel, ConfigDict, StrictBool
+from pydantic import StrictBool
 
 from asibot.errors import RpcError
 from asibot.local_http import Callers
-from asibot.web import errors, guard, lan
+from asibot.web import errors, guard, lan, page_messages
 from asibot.web.api_files import ICON_LIMIT, IMPORT_LIMIT
 from asibot.web.api_files import router as files_router
 from asibot.web import api_base
@@ -32,6 +32,7 @@ from asibot.web.api_robots import router as robots_router
 from asibot.web.cameras import Cameras
 from asibot.web.fleet import Fleet
 from asibot.web.live import Live
+from asibot.web.models import Strict
 from asibot.web.motion import Motion
 from asibot.web.runner import ProgramRunner
 from asibot.web.tasks_bus import TaskDesk
@@ -43,8 +44,6 @@ STATIC = Path(str(resources.files("asibot.web") / "static"))
 CHARSET = '<meta charset="utf-8">'
 #: Largest request body, bytes; uploads have their own, larger limits.
 BODY_LIMIT = 1024 * 1024
-#: Largest text message of the page's WebSocket, characters (a pointer report is about 200).
-PAGE_MESSAGE_LIMIT = 16 * 1024
 UPLOAD_PATHS = {"/api/icons": ICON_LIMIT + 64 * 1024, "/api/import": IMPORT_LIMIT + 64 * 1024}
 
 log = logging.getLogger("asibot.web")
@@ -108,9 +107,8 @@ class BodyLimit:
             await too_big(scope, receive, send)
 
 
-class VoiceSettings(BaseModel):
+class VoiceSettings(Strict):
     """Ask "Shall I start <task>? Say yes or no." before a task heard by voice starts."""
-    model_config = ConfigDict(extra="forbid")
     confirm: StrictBool
 
 
@@ -181,7 +179,7 @@ def create_app(web: Web) -> guard.PageGuard:
             sender.cancel()
             _stop_listening(page)
             if page.holding:  # a closed tab must not leave a hold-to-move running
-                await asyncio.to_thread(_stop_quietly, web, page.holding)
+                await asyncio.to_thread(stop_quietly, web.motion, page.holding, "a hold")
 
     @app.get("/", include_in_schema=False)
     def index() -> HTMLResponse:
@@ -194,11 +192,15 @@ def create_app(web: Web) -> guard.PageGuard:
     return guard.PageGuard(BodyLimit(app), web.callers, web.session)
 
 
-def _stop_quietly(web: Web, robot: str) -> None:
+def stop_quietly(motion: Motion, robot: str, after: str) -> None:
+    """Stop the arm once what moved it has ended (a hold let go, a page closed, a program gone):
+    that has ended either way, so a failed stop is logged, never raised into it."""
     try:
-        web.motion.stop(robot)
-    except RpcError as exc:
-        log.info("stop of %s after a hold: %s", robot, exc)
+        motion.stop(robot)
+    except RpcError as exc:     # the controller's own refusal, e.g. while its estop is engaged
+        log.info("stop of %s after %s: %s", robot, after, exc)
+    except Exception as exc:
+        log.warning("could not stop %s after %s: %s", robot, after, exc)
 
 
 def _stop_listening(page) -> None:
@@ -226,39 +228,46 @@ def _tool_pitch(web: Web, robot: str) -> float | None:
 
 
 async def _on_page_message(web: Web, page, text: str) -> None:
-    """Streams over the socket: `hold` beats while a jog button is held and `point` reports of a
-    handheld pointer (asibot.web.pointer), `release` when either ends; `mic` starts or stops
-    the page's microphone."""
+    """One message of the page (page_messages: checked there, once)."""
     try:
-        if len(text) > PAGE_MESSAGE_LIMIT:
-            raise ValueError("too long")
-        msg = json.loads(text)
-        kind = msg["type"]
-    except (ValueError, KeyError, TypeError, RecursionError):   # RecursionError: JSON nested too deep
-        await page.socket.send_text(json.dumps({"type": "refused", "text": "The page sent a message the server does not understand."}))
+        msg = page_messages.read(text, web.fleet.ids())
+    except page_messages.Refused as refused:
+        await _on_refused(web, page, refused)
         return
-    if kind == "mic":             # the page starts listening (rate: Hz) or stops (rate: null)
+    if isinstance(msg, page_messages.Mic):
         _stop_listening(page)
-        if msg.get("rate") is not None:
-            try:
-                page.mic = web.voice.start(page.id, msg.get("rate"))
-                page.mic_rate = msg["rate"]
-            except MicError as exc:
-                page.offer(json.dumps({"type": "refused", "text": str(exc)}))
-    elif kind in ("hold", "point"):
-        robot = msg.get("robot")
+        if msg.rate is not None:
+            page.mic, page.mic_rate = web.voice.start(page.id, msg.rate), msg.rate
+    elif isinstance(msg, (page_messages.Hold, page_messages.Point)):
+        page.holding = msg.robot
         try:
-            if robot not in web.fleet.ids():
-                raise RpcError("unavailable", f"Robot {robot!r} is not connected.")
-            page.holding = robot
-            if kind == "hold":
-                await asyncio.to_thread(web.motion.hold, robot, msg.get("space"), msg.get("axis"),
-                                        msg.get("direction"), msg.get("level"))
+            if isinstance(msg, page_messages.Hold):
+                await asyncio.to_thread(web.motion.hold, msg.robot, msg.space, msg.axis, msg.direction, msg.level)
             else:
-                await asyncio.to_thread(web.motion.point, robot, msg, _tool_pitch(web, robot))
+                await asyncio.to_thread(web.motion.point, msg.robot, msg.reading_message(), _tool_pitch(web, msg.robot))
         except RpcError as exc:
-            page.offer(json.dumps({"type": "refused", "code": exc.code, "text": exc.message}))
-    elif kind == "release":
+            page.offer(page_messages.Refused(exc.message, exc.code).json())
+    elif isinstance(msg, page_messages.Release):
         robot, page.holding = page.holding, None
         if robot:
-            await asyncio.to_thread(_stop_quietly, web, robot)
+            await asyncio.to_thread(stop_quietly, web.motion, robot, "a hold")
+
+
+async def _on_refused(web: Web, page, refused: page_messages.Refused) -> None:
+    """Tell the page, after what its message would have done first: a `mic` stops the listening,
+    and a robot's message for a connected robot makes it the one this page moves, so a release
+    or a closed tab stops it; a bad pointer reading ends the pointer's stream at once (a device
+    that sends NaN mid-stream must not leave the arm moving until the watchdog)."""
+    if refused.kind is None:
+        await page.socket.send_text(refused.json())
+        return
+    if refused.kind == "mic":
+        _stop_listening(page)
+    if refused.robot is not None:
+        page.holding = refused.robot
+        if refused.moving:
+            try:
+                await asyncio.to_thread(web.motion.point, refused.robot, page_messages.STILL, None)
+            except RpcError as exc:
+                refused = page_messages.Refused(exc.message, exc.code)
+    page.offer(refused.json())

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from asibot.certificates import alt_names
-from asibot.web.userdata import write_atomic
+from asibot.files import write_atomic
 
 COOKIE = "asibot_token"
 #: Paths a browser may load before it has the token (the page tells it how to get one).

@@ -20,7 +20,7 @@ import uvicorn
 from asibot import local_http, runtime
 from asibot.bus import Bus
 from asibot.web import guard, lan as lan_access
-from asibot.web.app import Web, create_app
+from asibot.web.app import Web, create_app, stop_quietly
 from asibot.web.cameras import Cameras
 from asibot.web.fleet import Fleet
 from asibot.web.live import Live
@@ -73,7 +73,7 @@ class WebService(runtime.Service):
             env={"ASIBOT_ROUTER": bus.endpoint},
             on_output=lambda stream, line: live.send({"type": "output", "stream": stream, "line": line}),
             on_exit=self._ended,
-            stop_robot=lambda robot: _stop_quietly(motion, robot))
+            stop_robot=lambda robot: stop_quietly(motion, robot, "its program ended"))
         tasks = TaskDesk(bus, data, runner, is_live=lambda robot: robot in self.fleet.ids())
         names = [host, *local_http.names_from_env(HOSTS_ENV)]
         if lan:
@@ -123,13 +123,6 @@ class WebService(runtime.Service):
     def close(self) -> None:
         self.server.should_exit = True
         self.web.runner.close()
-
-
-def _stop_quietly(motion: Motion, robot: str) -> None:
-    try:
-        motion.stop(robot)
-    except Exception as exc:  # the program is gone either way; say why the stop failed
-        log.warning("could not stop %s after its program ended: %s", robot, exc)
 
 
 def build(bus: Bus, args: argparse.Namespace) -> WebService:

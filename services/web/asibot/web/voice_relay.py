@@ -30,6 +30,14 @@ class MicError(ValueError):
     """A microphone frame or setting the page should not have sent; the sentence says what."""
 
 
+def check_rate(rate: object) -> int:
+    """A microphone's rate as the page said it; MicError with the sentence when it is not one."""
+    if isinstance(rate, bool) or not isinstance(rate, int) or not RATES[0] <= rate <= RATES[1]:
+        raise MicError(f"The microphone's rate must be a whole number of Hz from {RATES[0]} to {RATES[1]}; "
+                       f"the page said {rate!r}.")
+    return rate
+
+
 def source_of(page_id: str) -> str:
     return f"web-{page_id}"
 
@@ -42,11 +50,9 @@ class VoiceRelay:
         self._publishers: dict[str, Any] = {}
         bus.subscribe(keys.voice_heard(), VoiceHeard, self._on_heard, maxsize=50)
 
-    def start(self, page_id: str, rate: object) -> Any:
-        """A page starts listening at `rate` Hz; returns the subscription to close when it stops."""
-        if isinstance(rate, bool) or not isinstance(rate, int) or not RATES[0] <= rate <= RATES[1]:
-            raise MicError(f"The microphone's rate must be a whole number of Hz from {RATES[0]} to {RATES[1]}; "
-                           f"the page said {rate!r}.")
+    def start(self, page_id: str, rate: int) -> Any:
+        """A page starts listening at `rate` Hz (`check_rate`: the page's message was checked with
+        it); returns the subscription to close when it stops."""
         source = source_of(page_id)
         self._publishers.setdefault(source, self.bus.publisher(keys.voice_audio(source), AudioChunk))
         return self.bus.subscribe(keys.voice_events(source), Event,

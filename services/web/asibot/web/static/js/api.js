@@ -28,6 +28,68 @@ async function request(method, path, body) {
   return data;
 }
 
+// --- the server's paths, written here once (services/web/asibot/web/api_*.py) -----------------
+// Every name in a path is encoded, so a point, program or task name with a space or a slash
+// stays one part of it.
+const at = (...parts) => `/api/${parts.map((p) => encodeURIComponent(p)).join('/')}`;
+
+export const paths = {
+  config: at('config'),
+  estop: at('estop'),
+  phone: at('phone'),
+  phoneQr: at('phone', 'qr.png'),
+  voice: at('voice'),
+  robot: {
+    model: (id) => at('robots', id, 'model'),
+    step: (id) => at('robots', id, 'step'),
+    move: (id) => at('robots', id, 'move'),
+    inverse: (id) => at('robots', id, 'inv'),
+    home: (id) => at('robots', id, 'home'),
+    stop: (id) => at('robots', id, 'stop'),
+    gripper: (id) => at('robots', id, 'gripper'),
+    release: (id) => at('robots', id, 'release'),
+    resetFault: (id) => at('robots', id, 'reset_fault'),
+    cameras: (id) => at('robots', id, 'cameras'),
+    camera: (id, name) => at('robots', id, 'cameras', `${name}.mjpg`),
+    capture: (id) => at('robots', id, 'capture'),
+    suggestedPointName: (id) => at('robots', id, 'suggested-point-name'),
+    goToPoint: (id, point) => at('robots', id, 'points', point, 'go'),
+  },
+  points: at('points'),
+  point: (name) => at('points', name),
+  renamePoint: (name) => at('points', name, 'rename'),
+  programs: at('programs'),
+  program: (name) => at('programs', name),
+  renameProgram: (name) => at('programs', name, 'rename'),
+  runProgram: (name) => at('programs', name, 'run'),
+  restoreVersion: (name, version) => at('programs', name, 'versions', version, 'restore'),
+  check: at('check'),
+  run: at('run'),
+  stopRun: at('run', 'stop'),
+  words: at('words'),
+  word: (text) => at('words', text),
+  learnWord: at('voice', 'learn'),
+  forgetWord: at('voice', 'forget'),
+  learnedWords: at('voice', 'learned'),
+  tasks: at('tasks'),
+  task: (name) => at('tasks', name),
+  launchTask: (name) => at('tasks', name, 'launch'),
+  icons: at('icons'),
+  icon: (name) => at('icons', name),
+  importFiles: at('import'),
+  exportFiles: at('export.zip'),
+  base: {
+    map: (id) => at('base', id, 'map'),
+    goto: (id) => at('base', id, 'goto'),
+    cancel: (id) => at('base', id, 'cancel'),
+    drive: (id) => at('base', id, 'drive'),
+    settings: (id) => at('base', id, 'settings'),
+    places: (id) => at('base', id, 'places'),
+    place: (id, name) => at('base', id, 'places', name),
+    renamePlace: (id, name) => at('base', id, 'places', name, 'rename'),
+  },
+};
+
 export const api = {
   get: (path) => request('GET', path),
   post: (path, body = {}) => request('POST', path, body),
@@ -96,14 +158,16 @@ export function sendSound(buffer) {
   if (socket && socket.readyState === WebSocket.OPEN) socket.send(buffer);
 }
 
-function connected(r) { return r.driver || r.controller; }
+// A robot the page can command: its driver or its controller is alive (the server's Fleet.ids).
+export function isConnected(robot) { return Boolean(robot && (robot.driver || robot.controller)); }
+
+export function connectedRobots() { return [...state.robots.values()].filter(isConnected); }
 
 // Without a choice, command the first connected arm, preferring a simulated one.
 function pickDefault() {
   const current = state.chosen && state.robots.get(state.chosen);
-  if (current && connected(current)) return;
-  if (current && !connected(current)) return;   // keep the user's choice while it reconnects
-  const live = [...state.robots.values()].filter(connected).filter((r) => r.arm);
+  if (current) return;   // the user's choice, kept while it reconnects
+  const live = connectedRobots().filter((r) => r.arm);
   const pick = live.find((r) => r.simulated && r.arm === 'asibot') || live.find((r) => r.simulated) || live[0];
   if (pick) { state.chosen = pick.id; changed('chosen'); }
 }

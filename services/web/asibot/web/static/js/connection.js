@@ -1,7 +1,7 @@
 // The Connection Manager, always on screen: the robots found on the bus (simulated and real side
 // by side, as the seed's connectSim / connectReal), which one the page commands, and whether its
 // driver and controller are alive, its emergency stop engaged, or a fault reported.
-import { api, choose, onChange, state } from './api.js';
+import { api, choose, connectedRobots, onChange, paths, state } from './api.js';
 import { attempt, el } from './ui.js';
 
 function lamp(text, cls, title) {
@@ -19,14 +19,14 @@ function card(robot) {
   if (robot.estop.engaged) {
     actions.push(el('button', {
       type: 'button', 'aria-label': `Release emergency stop of ${robot.id}`,
-      onclick: () => attempt(() => api.post(`/api/robots/${robot.id}/release`),
+      onclick: () => attempt(() => api.post(paths.robot.release(robot.id)),
         `${robot.id}: emergency stop released. Nothing moves until you ask it to.`),
     }, 'Release emergency stop'));
   }
   if (robot.fault) {
     actions.push(el('button', {
       type: 'button', 'aria-label': `Reset fault of ${robot.id}`,
-      onclick: () => attempt(() => api.post(`/api/robots/${robot.id}/reset_fault`), `${robot.id}: fault cleared.`),
+      onclick: () => attempt(() => api.post(paths.robot.resetFault(robot.id)), `${robot.id}: fault cleared.`),
     }, 'Reset fault'));
   }
   return el('div', { class: `robot-card${chosen ? ' chosen' : ''}`, dataset: { robot: robot.id } },
@@ -43,7 +43,7 @@ function card(robot) {
 
 export function mountConnection(root) {
   const render = () => {
-    const robots = [...state.robots.values()].filter((r) => r.driver || r.controller);
+    const robots = connectedRobots();
     if (!robots.length) {
       root.replaceChildren(el('p', { class: 'none' },
         state.feed === 'live' ? 'No robot found. Start the stack with `asibot up`.' : 'Waiting for the server…'));

@@ -6,7 +6,7 @@
 // if the beats stop for any other reason the controller's 200 ms watchdog stops the arm).
 // With switch scanning (scanning.js) a hold cannot be held: a select starts the movement and the
 // next press of the switch stops it; the stops above still apply.
-import { api, chosenRobot, sendLive, state } from './api.js';
+import { api, chosenRobot, paths, sendLive, state } from './api.js';
 import { attempt, el, fmt } from './ui.js';
 
 const BEAT_MS = 80;
@@ -103,7 +103,7 @@ export function jogGrid(space, rows, read) {
         type: 'button', 'aria-label': `${row.label} ${direction < 0 ? 'minus' : 'plus'}`,
         onclick: () => {
           if (prefs.mode !== 'step' || !chosenRobot()) return;
-          attempt(() => api.post(`/api/robots/${state.chosen}/step`,
+          attempt(() => api.post(paths.robot.step(state.chosen),
             { space, axis: row.axis, direction, level: prefs.level }));
         },
       }, direction < 0 ? '−' : '+');
@@ -123,13 +123,13 @@ export function jogGrid(space, rows, read) {
 export function stopButton() {
   return el('button', {
     type: 'button', class: 'danger',
-    onclick: () => state.chosen && attempt(() => api.post(`/api/robots/${state.chosen}/stop`)),
+    onclick: () => state.chosen && attempt(() => api.post(paths.robot.stop(state.chosen))),
   }, 'Stop arm');
 }
 
 // Open and close the gripper of the robot the page commands (the Cartesian and Pointer tabs).
 export function grip(close) {
-  return attempt(() => api.post(`/api/robots/${state.chosen}/gripper`, { close }),
+  return attempt(() => api.post(paths.robot.gripper(state.chosen), { close }),
     close ? (r) => (r.holding ? 'Gripper closed: holding.' : 'Gripper closed: empty.') : 'Gripper open.');
 }
 

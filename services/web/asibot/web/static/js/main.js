@@ -1,6 +1,6 @@
 // The page: tabs as client-side views (a tab change loads no page), the Connection Manager, the
 // emergency stop (button and Esc key), and the live feed that keeps every view current.
-import { api, chosenRobot, connectFeed, onChange, onMessage, state } from './api.js';
+import { api, chosenRobot, connectFeed, onChange, onMessage, paths, state } from './api.js';
 import { mountConnection } from './connection.js';
 import { startScanning } from './scanning.js';
 import { attempt, el, notify } from './ui.js';
@@ -23,7 +23,7 @@ const VIEWS = [home, joint, cartesian, pointer, program, speech, assigner, launc
 let active = null;   // { view, handle }
 
 function emergencyStop() {
-  attempt(() => api.post('/api/estop'), (r) => `Emergency stop: ${r.robots.length ? r.robots.join(', ') : 'no robot'} stopped. Release it in the Connection Manager.`);
+  attempt(() => api.post(paths.estop), (r) => `Emergency stop: ${r.robots.length ? r.robots.join(', ') : 'no robot'} stopped. Release it in the Connection Manager.`);
 }
 
 function show(id) {
@@ -67,7 +67,7 @@ function feedState() {
 }
 
 async function start() {
-  state.config = await api.get('/api/config');
+  state.config = await api.get(paths.config);
   tabs();
   mountConnection(document.getElementById('connection'));
   startScanning();

@@ -1,12 +1,12 @@
 // Taught points: capture the arm's point (also while it moves), rename, delete, and go there
 // with one touch. Shared by the Joint and Cartesian pages; the Program page lists them too.
-import { api, state } from './api.js';
+import { api, paths, state } from './api.js';
 import { attempt, confirmable, el, fmt, notify } from './ui.js';
 
 const listeners = new Set();
 export function onPointsChange(fn) { listeners.add(fn); return () => listeners.delete(fn); }
 export async function loadPoints() {
-  const data = await api.get('/api/points');
+  const data = await api.get(paths.points);
   for (const fn of listeners) fn(data);
   return data;
 }
@@ -18,18 +18,18 @@ function row(point) {
     el('span', { class: 'pvals' }, point.values.map((v, i) => fmt(v, i < 3 ? 3 : 1)).join('  ')),
     el('button', {
       type: 'button', class: 'primary', 'aria-label': `Go to ${point.name}`,
-      onclick: () => state.chosen && attempt(() => api.post(`/api/robots/${state.chosen}/points/${encodeURIComponent(point.name)}/go`, { kind: 'movj' }),
+      onclick: () => state.chosen && attempt(() => api.post(paths.robot.goToPoint(state.chosen, point.name), { kind: 'movj' }),
         `Moving to ${point.name}.`),
     }, 'Go'),
     el('button', { type: 'button', 'aria-label': `Rename ${point.name}`, onclick: edit }, 'Rename'),
     confirmable('Delete', { 'aria-label': `Delete ${point.name}` }, () => attempt(async () => {
-      await api.del(`/api/points/${encodeURIComponent(point.name)}`);
+      await api.del(paths.point(point.name));
       await loadPoints();
     }, `${point.name} deleted.`)));
   const edit = () => {
     const input = el('input', { type: 'text', value: point.name, 'aria-label': `New name for ${point.name}` });
     const save = () => attempt(async () => {
-      await api.post(`/api/points/${encodeURIComponent(point.name)}/rename`, { name: input.value.trim() });
+      await api.post(paths.renamePoint(point.name), { name: input.value.trim() });
       await loadPoints();
     });
     input.addEventListener('keydown', (e) => { if (e.key === 'Enter') save(); if (e.key === 'Escape') { e.stopPropagation(); show(); } });
@@ -49,7 +49,7 @@ export function pointsPanel() {
     type: 'button', class: 'primary capture',
     onclick: () => attempt(async () => {
       if (!state.chosen) throw new Error('Choose a robot in the Connection Manager first.');
-      const p = await api.post(`/api/robots/${state.chosen}/capture`, name.value.trim() ? { name: name.value.trim() } : {});
+      const p = await api.post(paths.robot.capture(state.chosen), name.value.trim() ? { name: name.value.trim() } : {});
       name.value = '';
       await loadPoints();
       return p;
@@ -64,7 +64,7 @@ export function pointsPanel() {
   const suggest = async () => {
     if (!state.chosen || document.hidden) return;
     try {
-      const s = await api.get(`/api/robots/${state.chosen}/suggested-point-name`);
+      const s = await api.get(paths.robot.suggestedPointName(state.chosen));
       name.placeholder = s.name;
     } catch { /* the robot went away: keep the last suggestion */ }
   };

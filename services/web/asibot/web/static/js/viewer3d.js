@@ -3,7 +3,7 @@
 // target before it is sent. Under it: Pause (the picture stops following the arm, WCAG 2.2.2) and
 // buttons that turn and zoom the view, so dragging is never the only way (WCAG 2.5.7, 2.1.1).
 import * as THREE from '/static/vendor/three.js';
-import { api } from './api.js';
+import { api, paths } from './api.js';
 import { el } from './ui.js';
 
 const SOLID = new THREE.MeshStandardMaterial({ color: 0x4f7fb0, metalness: 0.2, roughness: 0.55 });
@@ -73,7 +73,7 @@ export class RobotViewer {
     for (const r of [this.robot, this.ghost]) if (r) this.scene.remove(r);
     this.robot = this.ghost = null;
     if (!robotId) { this.dirty = true; return; }
-    const model = await api.get(`/api/robots/${robotId}/model`);
+    const model = await api.get(paths.robot.model(robotId));
     const loader = new THREE.URDFLoader();
     const make = (material) => {
       const robot = loader.parse(model.urdf);

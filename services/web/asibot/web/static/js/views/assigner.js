@@ -1,5 +1,5 @@
 // Assigner tab: program + words + icon -> a task, the button the Launcher shows.
-import { api } from '../api.js';
+import { api, paths } from '../api.js';
 import { attempt, el, notify } from '../ui.js';
 
 export default {
@@ -24,7 +24,7 @@ export default {
       b.setAttribute('aria-pressed', String(chosenWords.has(w)));
     };
     const refresh = async () => {
-      const [p, w, i, t] = await Promise.all([api.get('/api/programs'), api.get('/api/words'), api.get('/api/icons'), api.get('/api/tasks')]);
+      const [p, w, i, t] = await Promise.all([api.get(paths.programs), api.get(paths.words), api.get(paths.icons), api.get(paths.tasks)]);
       const keep = program.value;
       program.replaceChildren(...p.programs.map((n) => el('option', { value: n }, n)));
       if (p.programs.includes(keep)) program.value = keep;
@@ -36,9 +36,9 @@ export default {
       icons.replaceChildren(...i.icons.map((x) => el('button', {
         type: 'button', role: 'radio', 'aria-checked': String(x.name === icon),
         'aria-label': `Icon ${x.name.replace(/\.[a-z]+$/, '')}`, dataset: { icon: x.name }, onclick: () => pickIcon(x.name),
-      }, el('img', { src: `/api/icons/${encodeURIComponent(x.name)}`, alt: '' }))));
+      }, el('img', { src: paths.icon(x.name), alt: '' }))));
       tasks.replaceChildren(...(t.tasks.length ? t.tasks.map((x) => el('li', {},
-        el('img', { src: `/api/icons/${encodeURIComponent(x.icon)}`, alt: '', width: '48', height: '48' }),
+        el('img', { src: paths.icon(x.icon), alt: '', width: '48', height: '48' }),
         el('span', { class: 'pname' }, x.name),
         el('span', { class: 'pvals' }, `${x.program}.py${x.words.length ? ` · "${x.words.join('", "')}"` : ''}`),
         el('button', {
@@ -48,12 +48,12 @@ export default {
         }, 'Edit'),
         el('button', {
           type: 'button', class: 'danger', 'aria-label': `Delete task ${x.name}`,
-          onclick: () => attempt(async () => { await api.del(`/api/tasks/${encodeURIComponent(x.name)}`); await refresh(); }, 'Task deleted.'),
+          onclick: () => attempt(async () => { await api.del(paths.task(x.name)); await refresh(); }, 'Task deleted.'),
         }, 'Delete'))) : [el('li', { class: 'muted' }, 'No tasks yet.')]));
     };
     const save = () => attempt(async () => {
       if (!icon) throw new Error('Choose an icon for the task.');
-      const r = await api.put(`/api/tasks/${encodeURIComponent(name.value.trim())}`,
+      const r = await api.put(paths.task(name.value.trim()),
         { program: program.value, words: [...chosenWords], icon });
       await refresh();
       return r;
@@ -61,7 +61,7 @@ export default {
     upload.addEventListener('change', () => attempt(async () => {
       const form = new FormData();
       form.append('file', upload.files[0]);
-      const r = await api.post('/api/icons', form);
+      const r = await api.post(paths.icons, form);
       upload.value = '';
       await refresh();
       pickIcon(r.name);

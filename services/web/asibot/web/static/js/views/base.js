@@ -1,14 +1,14 @@
 // Base tab: a mobile robot's map with where it is (and how sure: its particles), what its scan
 // sees and the way it plans; tap the map to send it there, or choose a named place; drive it
 // with the thesis's primitives as large buttons; keep its places.
-import { api, onChange, state } from '../api.js';
+import { api, connectedRobots, onChange, paths, state } from '../api.js';
 import { attempt, confirmable, el, notify } from '../ui.js';
 
 const COLOURS = { free: [255, 255, 255], occupied: [19, 32, 43], unknown: [201, 209, 216] };
 const PX_PER_CELL = 3;
 
 function bases() {
-  return [...state.robots.values()].filter((r) => r.has_base && (r.driver || r.controller));
+  return connectedRobots().filter((r) => r.has_base);
 }
 
 // The map: its grid drawn once into an image, the live layers on top at every update.
@@ -32,7 +32,7 @@ class MapView {
   }
 
   async load() {
-    const g = await api.get(`/api/base/${encodeURIComponent(this.robotId)}/map`);
+    const g = await api.get(paths.base.map(this.robotId));
     const cells = Uint8Array.from(atob(g.cells), (c) => c.charCodeAt(0));
     const image = new ImageData(g.width, g.height);
     for (let row = 0; row < g.height; row += 1) {
@@ -134,9 +134,8 @@ function statusText(robot) {
 function placesPanel(robotId, onPlaces) {
   const list = el('ul', { class: 'points', 'aria-label': 'Places' });
   const name = el('input', { type: 'text', 'aria-label': 'Name of the new place', placeholder: 'sofa' });
-  const base = `/api/base/${encodeURIComponent(robotId)}`;
   const load = async () => {
-    const { places } = await api.get(`${base}/places`);
+    const { places } = await api.get(paths.base.places(robotId));
     onPlaces(places);
     list.replaceChildren(...places.map((p) => row(p)));
   };
@@ -146,17 +145,17 @@ function placesPanel(robotId, onPlaces) {
       el('span', { class: 'pname' }, p.name),
       el('button', {
         type: 'button', class: 'primary', 'aria-label': `Go to ${p.name}`,
-        onclick: () => attempt(() => api.post(`${base}/goto`, { place: p.name }), `On the way to ${p.name}.`),
+        onclick: () => attempt(() => api.post(paths.base.goto(robotId), { place: p.name }), `On the way to ${p.name}.`),
       }, 'Go'),
       el('button', { type: 'button', 'aria-label': `Rename ${p.name}`, onclick: edit }, 'Rename'),
       confirmable('Remove', { 'aria-label': `Remove ${p.name}` }, () => attempt(async () => {
-        await api.del(`${base}/places/${encodeURIComponent(p.name)}`);
+        await api.del(paths.base.place(robotId, p.name));
         await load();
       }, `${p.name} removed.`)));
     const edit = () => {
       const input = el('input', { type: 'text', value: p.name, 'aria-label': `New name for ${p.name}` });
       const save = () => attempt(async () => {
-        await api.post(`${base}/places/${encodeURIComponent(p.name)}/rename`, { new_name: input.value.trim() });
+        await api.post(paths.base.renamePlace(robotId, p.name), { new_name: input.value.trim() });
         await load();
       });
       input.addEventListener('keydown', (e) => { if (e.key === 'Enter') save(); if (e.key === 'Escape') { e.stopPropagation(); show(); } });
@@ -170,7 +169,7 @@ function placesPanel(robotId, onPlaces) {
   const save = el('button', {
     type: 'button', class: 'primary',
     onclick: () => attempt(async () => {
-      const saved = await api.post(`${base}/places`, { name: name.value.trim() });
+      const saved = await api.post(paths.base.places(robotId), { name: name.value.trim() });
       name.value = '';
       await load();
       return saved;
@@ -183,17 +182,16 @@ function placesPanel(robotId, onPlaces) {
 }
 
 function drivePanel(robotId) {
-  const base = `/api/base/${encodeURIComponent(robotId)}`;
   const keepGoing = el('button', { type: 'button', 'aria-pressed': 'false' }, 'Keep going until Stop');
   keepGoing.addEventListener('click', () => keepGoing.setAttribute('aria-pressed', String(keepGoing.getAttribute('aria-pressed') !== 'true')));
   const levels = el('p', { class: 'readout', role: 'status' });
   const button = (name) => el('button', {
     type: 'button', class: name === 'stop' ? 'drive drive-stop' : 'drive', dataset: { drive: name },
-    onclick: () => attempt(() => api.post(`${base}/drive`, { name, continuous: name !== 'stop' && keepGoing.getAttribute('aria-pressed') === 'true' })),
+    onclick: () => attempt(() => api.post(paths.base.drive(robotId), { name, continuous: name !== 'stop' && keepGoing.getAttribute('aria-pressed') === 'true' })),
   }, name[0].toUpperCase() + name.slice(1));
   const changes = state.config.base.changes.map((change) => el('button', {
     type: 'button', onclick: () => attempt(async () => {
-      const r = await api.post(`${base}/settings`, { change });
+      const r = await api.post(paths.base.settings(robotId), { change });
       levels.textContent = r.text[0].toUpperCase() + r.text.slice(1);
     }),
   }, change[0].toUpperCase() + change.slice(1)));
@@ -211,11 +209,10 @@ export default {
     const waiting = () => root.replaceChildren(el('section', { class: 'panel' }, el('h2', {}, 'Base'),
       el('p', {}, 'No mobile robot is connected. `asibot up` starts pioneer-sim, the Pioneer P3-AT in the apartment.')));
     const build = (robot) => {
-      const base = `/api/base/${encodeURIComponent(robot.id)}`;
-      const map = new MapView(robot.id, (p) => attempt(() => api.post(`${base}/goto`, { x: p.x, y: p.y }),
+      const map = new MapView(robot.id, (p) => attempt(() => api.post(paths.base.goto(robot.id), { x: p.x, y: p.y }),
         `On the way to (${p.x.toFixed(1)}, ${p.y.toFixed(1)}).`));
       const status = el('p', { class: 'big nav-status', role: 'status', 'aria-live': 'polite' });
-      const cancel = el('button', { type: 'button', class: 'danger', onclick: () => attempt(() => api.post(`${base}/cancel`), 'Canceled.') }, 'Cancel the trip');
+      const cancel = el('button', { type: 'button', class: 'danger', onclick: () => attempt(() => api.post(paths.base.cancel(robot.id)), 'Canceled.') }, 'Cancel the trip');
       const events = el('ul', { class: 'events', 'aria-label': 'What the robot said' });
       const drive = drivePanel(robot.id);
       const places = placesPanel(robot.id, (list) => map.update(map.live, list));

@@ -1,6 +1,6 @@
 // Cartesian tab: jog the tool along x, y, z and its two rotations, move to (or by) a typed point
 // with movj or movl as on the seed, open and close the gripper, capture points.
-import { api, chosenRobot, state } from '../api.js';
+import { api, chosenRobot, paths, state } from '../api.js';
 import { gripperButtons, jogGrid, modeAndSpeed, stopButton } from '../jog.js';
 import { pointsPanel } from '../points.js';
 import { attempt, el } from '../ui.js';
@@ -26,7 +26,7 @@ export function cartesianControls() {
     return values().map((v, i) => v + r.point[i]);
   };
   const showTarget = () => attempt(async () => {
-    const reply = await api.post(`/api/robots/${state.chosen}/inv`, { point: target() });
+    const reply = await api.post(paths.robot.inverse(state.chosen), { point: target() });
     viewer().showGhost(reply.names, reply.joints);
   });
   const fromArm = () => {
@@ -41,7 +41,7 @@ export function cartesianControls() {
     el('div', { class: 'row' },
       el('button', {
         type: 'button', class: 'primary',
-        onclick: () => attempt(() => api.post(`/api/robots/${state.chosen}/move`,
+        onclick: () => attempt(() => api.post(paths.robot.move(state.chosen),
           { kind: kind.value, values: values(), relative: origin.value === 'relative' }), 'Moving.'),
       }, 'Move'),
       el('button', { type: 'button', onclick: showTarget }, 'Show target'),

@@ -1,5 +1,5 @@
 // Home tab: what this page is for, the robot it commands, and the Task Creator wizard.
-import { api, chosenRobot } from '../api.js';
+import { api, chosenRobot, paths } from '../api.js';
 import { attempt, el } from '../ui.js';
 import { startWizard } from '../wizard.js';
 
@@ -26,7 +26,7 @@ export default {
     upload.addEventListener('change', () => attempt(async () => {
       const form = new FormData();
       form.append('file', upload.files[0]);
-      const r = await api.post('/api/import', form);
+      const r = await api.post(paths.importFiles, form);
       upload.value = '';
       report.replaceChildren(
         el('p', {}, `Imported: ${r.imported.length ? r.imported.join(', ') : 'nothing'}.`),
@@ -39,16 +39,16 @@ export default {
       el('p', {}, 'Points, programs, words, tasks and icons, in the formats of the original ASIBOT Task Creator ',
         '(points.ini, words.ini, <task>.task), so an existing user\'s files load.'),
       el('div', { class: 'row' },
-        el('a', { href: '/api/export.zip', download: 'asibot-user-files.zip', class: 'button-link' }, 'Export my files'),
+        el('a', { href: paths.exportFiles, download: 'asibot-user-files.zip', class: 'button-link' }, 'Export my files'),
         el('label', {}, 'Import ASIBOT files: ', upload)),
       report));
     // A phone or a tablet: the address (and its QR code) when the page serves the LAN.
     const phone = el('section', { class: 'panel', 'aria-label': 'Phone or tablet' }, el('h2', {}, 'Use a phone or a tablet'));
     root.append(phone);
-    api.get('/api/phone').then((p) => {
+    api.get(paths.phone).then((p) => {
       phone.append(el('p', {}, p.text));
       if (!p.lan) return;
-      phone.append(el('img', { class: 'qr', src: '/api/phone/qr.png', width: '264', height: '264',
+      phone.append(el('img', { class: 'qr', src: paths.phoneQr, width: '264', height: '264',
         alt: `QR code of the address ${p.urls[0]}` }));
       for (const url of p.urls) phone.append(el('p', { class: 'readout' }, url));
     }).catch((e) => phone.append(el('p', {}, `How to reach this page from a phone is not known: ${e.message}`)));

@@ -1,5 +1,5 @@
 // Joint tab: jog each joint, move all joints to (or by) typed values, capture points.
-import { api, chosenRobot, state } from '../api.js';
+import { api, chosenRobot, paths, state } from '../api.js';
 import { jogGrid, modeAndSpeed, stopButton } from '../jog.js';
 import { pointsPanel } from '../points.js';
 import { attempt, el } from '../ui.js';
@@ -15,7 +15,7 @@ export function jointControls(robot) {
   const values = () => inputs.map((x) => Number(x.value));
   const ghost = () => viewer().showGhost(names, values());
   inputs.forEach((x) => x.addEventListener('input', ghost));
-  const move = (relative) => attempt(() => api.post(`/api/robots/${state.chosen}/move`,
+  const move = (relative) => attempt(() => api.post(paths.robot.move(state.chosen),
     { kind: 'movj', values: values(), joints: true, relative }), relative ? 'Moving by the offsets.' : 'Moving to the joint values.');
   const fromArm = el('button', {
     type: 'button', onclick: () => {
@@ -28,7 +28,7 @@ export function jointControls(robot) {
   const panel = el('section', { class: 'panel', 'aria-label': 'Joint jogging' },
     el('h2', {}, 'Move joints'), modeAndSpeed(), jog.grid,
     el('div', { class: 'row' }, stopButton(),
-      el('button', { type: 'button', onclick: () => attempt(() => api.post(`/api/robots/${state.chosen}/home`, {}), 'Going home.') }, 'Home')),
+      el('button', { type: 'button', onclick: () => attempt(() => api.post(paths.robot.home(state.chosen), {}), 'Going home.') }, 'Home')),
     el('h3', {}, 'Move all joints'), form,
     el('div', { class: 'row' },
       el('button', { type: 'button', class: 'primary', onclick: () => move(false) }, 'Move to these joints'),

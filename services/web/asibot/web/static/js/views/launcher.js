@@ -1,6 +1,6 @@
 // Launcher tab: one large button per task (the seed's "Multi-Modal Task Launcher"); the running
 // task is shown with its output and a Stop button.
-import { api, onMessage, state } from '../api.js';
+import { api, onMessage, paths, state } from '../api.js';
 import { attempt, el, notify } from '../ui.js';
 import { outputPanel, stopProgramButton } from './program.js';
 
@@ -11,15 +11,15 @@ export default {
     const grid = el('div', { class: 'launcher', role: 'group', 'aria-label': 'Tasks' });
     const output = outputPanel();
     const refresh = async () => {
-      const { tasks } = await api.get('/api/tasks');
+      const { tasks } = await api.get(paths.tasks);
       grid.replaceChildren(...(tasks.length ? tasks.map((t) => el('button', {
         type: 'button', class: 'task-button', 'aria-label': `Launch ${t.name}`,
         onclick: () => attempt(async () => {
           if (!state.chosen) throw new Error('Choose a robot in the Connection Manager first.');
           output.clear();
-          return api.post(`/api/tasks/${encodeURIComponent(t.name)}/launch`, { robot: state.chosen });
+          return api.post(paths.launchTask(t.name), { robot: state.chosen });
         }, `${t.name}: started.`),
-      }, el('img', { src: `/api/icons/${encodeURIComponent(t.icon)}`, alt: '' }), t.name))
+      }, el('img', { src: paths.icon(t.icon), alt: '' }), t.name))
         : [el('p', { class: 'muted' }, 'No tasks yet: make one on the Assigner page (or start the wizard from Home).')]));
     };
     root.replaceChildren(

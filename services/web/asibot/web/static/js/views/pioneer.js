@@ -1,12 +1,12 @@
 // Pioneer arm tab: the Katana arm on the Pioneer (pioneer-sim), jogged like the ASIBOT.
-import { choose, state } from '../api.js';
+import { choose, connectedRobots, state } from '../api.js';
 import { el } from '../ui.js';
 import { viewer } from '../viewer3d.js';
 import { cartesianControls } from './cartesian.js';
 import { jointControls } from './joint.js';
 
 function katana() {
-  return [...state.robots.values()].find((r) => r.arm === 'katana' && (r.driver || r.controller));
+  return connectedRobots().find((r) => r.arm === 'katana');
 }
 
 export default {

@@ -3,7 +3,7 @@
 // (the previous version is kept), rename, delete, syntax check with line numbers; Run and Stop
 // with the program's output live in the page.
 import { EditorView, basicSetup, python, keymap } from '/static/vendor/codemirror.js';
-import { api, onMessage, state } from '../api.js';
+import { api, onMessage, paths, state } from '../api.js';
 import { loadPoints, onPointsChange } from '../points.js';
 import { attempt, confirmable, el, notify } from '../ui.js';
 
@@ -38,14 +38,14 @@ export function outputPanel() {
     if (msg.type === 'output') line(msg.stream, msg.line);
     if (msg.type === 'run') showStatus(msg.status);
   });
-  api.get('/api/run').then((s) => { out.replaceChildren(); s.output.forEach(([st, t]) => line(st, t)); showStatus(s); })
+  api.get(paths.run).then((s) => { out.replaceChildren(); s.output.forEach(([st, t]) => line(st, t)); showStatus(s); })
     .catch((e) => notify(e.message));
   const clear = () => out.replaceChildren();
   return { node: el('div', {}, status, out), clear, unmount: off };
 }
 
 export function stopProgramButton() {
-  return el('button', { type: 'button', class: 'danger', onclick: () => attempt(() => api.post('/api/run/stop'), 'Program stopped.') }, 'Stop');
+  return el('button', { type: 'button', class: 'danger', onclick: () => attempt(() => api.post(paths.stopRun), 'Program stopped.') }, 'Stop');
 }
 
 export default {
@@ -83,13 +83,13 @@ export default {
       }, `Line ${p.line}: ${p.message}`)));
     };
     const refreshList = async () => {
-      const { programs } = await api.get('/api/programs');
+      const { programs } = await api.get(paths.programs);
       list.replaceChildren(...(programs.length ? programs.map((name) => el('button', {
         type: 'button', 'aria-pressed': String(name === current), onclick: () => open(name),
       }, name)) : [el('span', { class: 'muted' }, 'No programs yet: type a name and touch New program.')]));
     };
     const open = (name) => attempt(async () => {
-      const p = await api.get(`/api/programs/${encodeURIComponent(name)}`);
+      const p = await api.get(paths.program(name));
       current = name;
       sessionStorage.setItem('asibot.program', name);
       title.textContent = `${name}.py`;
@@ -98,7 +98,7 @@ export default {
       versions.replaceChildren(...p.versions.slice(0, 8).map((v) => el('button', {
         type: 'button', title: `${v.size} bytes`,
         onclick: () => attempt(async () => {
-          const r = await api.post(`/api/programs/${encodeURIComponent(name)}/versions/${encodeURIComponent(v.id)}/restore`);
+          const r = await api.post(paths.restoreVersion(name, v.id));
           setText(r.text);
           await open(name);
         }, 'Previous version restored.'),
@@ -106,7 +106,7 @@ export default {
       await refreshList();
     });
     const save = () => current && attempt(async () => {
-      const r = await api.put(`/api/programs/${encodeURIComponent(current)}`, { text: text() });
+      const r = await api.put(paths.program(current), { text: text() });
       saved = text();
       showProblems(r.problems);
       await open(current);
@@ -114,7 +114,7 @@ export default {
     }, (r) => (r.problems.length ? 'Saved, but it has a syntax error: see below.' : `Saved ${current}.py.`));
     const create = () => attempt(async () => {
       const name = newName.value.trim();
-      await api.post('/api/programs', { name });
+      await api.post(paths.programs, { name });
       newName.value = '';
       await open(name);
     }, 'New program from the template.');
@@ -124,7 +124,7 @@ export default {
       const bar = el('div', { class: 'row' }, input,
         el('button', {
           type: 'button', class: 'primary', onclick: () => attempt(async () => {
-            await api.post(`/api/programs/${encodeURIComponent(current)}/rename`, { name: input.value.trim() });
+            await api.post(paths.renameProgram(current), { name: input.value.trim() });
             bar.remove();
             await open(input.value.trim());
           }, 'Renamed.'),
@@ -134,7 +134,7 @@ export default {
       input.focus();
     };
     const del = () => current && attempt(async () => {
-      await api.del(`/api/programs/${encodeURIComponent(current)}`);
+      await api.del(paths.program(current));
       current = null; sessionStorage.removeItem('asibot.program');
       title.textContent = 'No program open'; setText('');
       await refreshList();
@@ -159,7 +159,7 @@ export default {
     const run = () => current && attempt(async () => {
       if (text() !== saved) await save();
       output.clear();
-      return api.post(`/api/programs/${encodeURIComponent(current)}/run`, { robot: state.chosen, minutes: Number(minutes.value) });
+      return api.post(paths.runProgram(current), { robot: state.chosen, minutes: Number(minutes.value) });
     }, `Running ${current}.`);
     // A program that waits for ever is stopped at its time limit (the server's sandbox).
     const minutes = el('input', { type: 'number', id: 'run-minutes', min: '1', max: '240', value: '10', class: 'narrow' });
@@ -180,7 +180,7 @@ export default {
           el('button', { type: 'button', class: 'primary', onclick: save, 'aria-keyshortcuts': 'Control+S' }, 'Save'),
           el('button', {
             type: 'button', onclick: () => attempt(async () => {
-              const r = await api.post('/api/check', { text: text() });
+              const r = await api.post(paths.check, { text: text() });
               showProblems(r.problems);
               return r;
             }, (r) => (r.problems.length ? 'Syntax error: see below.' : 'No syntax errors.')),

@@ -2,7 +2,7 @@
 // task's word, and see what the voice service heard and did (it only listens for the words
 // given to tasks, and for stop, yes and no). "Record by saying it" teaches the voice service how
 // the user says a word: the next phrase said into the microphone becomes a pronunciation of it.
-import { api, onMessage, state } from '../api.js';
+import { api, onMessage, paths, state } from '../api.js';
 import { listening, onListening, startListening, stopListening } from '../microphone.js';
 import { attempt, el, notify } from '../ui.js';
 
@@ -40,7 +40,7 @@ function wordRow(w, sayings, refresh) {
       try {
         if (!listening()) await startListening();
         heard.textContent = `Listening: say “${w}” now.`;
-        const r = await api.post('/api/voice/learn', { word: w, page: state.page, seconds: LISTEN_S });
+        const r = await api.post(paths.learnWord, { word: w, page: state.page, seconds: LISTEN_S });
         await refresh();
         return r;
       } catch (e) {
@@ -51,11 +51,11 @@ function wordRow(w, sayings, refresh) {
   }, sayings.length ? 'Say it again' : 'Record by saying it');
   const forget = sayings.length ? [el('button', {
     type: 'button', 'aria-label': `Forget how I say it: ${w}`,
-    onclick: () => attempt(async () => { await api.post('/api/voice/forget', { text: w }); await refresh(); }, `How “${w}” is said is forgotten.`),
+    onclick: () => attempt(async () => { await api.post(paths.forgetWord, { text: w }); await refresh(); }, `How “${w}” is said is forgotten.`),
   }, 'Forget how I say it')] : [];
   const remove = el('button', {
     type: 'button', class: 'danger', 'aria-label': `Delete ${w}`,
-    onclick: () => attempt(async () => { await api.del(`/api/words/${encodeURIComponent(w)}`); await refresh(); }, `"${w}" deleted.`),
+    onclick: () => attempt(async () => { await api.del(paths.word(w)); await refresh(); }, `"${w}" deleted.`),
   }, 'Delete');
   return el('li', {}, el('span', { class: 'pname' }, w), record, ...forget, remove, heard);
 }
@@ -82,12 +82,12 @@ function micPanel() {
   // Ask yes first: a task heard starts only after "yes" (the voice service keeps the choice).
   const askFirst = [[false, 'Start a task at once'], [true, 'Ask me "yes" first']].map(([confirm, label]) => el('button', {
     type: 'button', dataset: { confirm: String(confirm) }, disabled: true,
-    onclick: () => attempt(async () => shownConfirm(await api.put('/api/voice', { confirm })),
+    onclick: () => attempt(async () => shownConfirm(await api.put(paths.voice, { confirm })),
       confirm ? 'A task heard now starts after you say "yes".' : 'A task heard now starts at once.'),
   }, label));
   const shownConfirm = (s) => askFirst.forEach((b) => { b.disabled = false; b.setAttribute('aria-pressed', String(b.dataset.confirm === String(s.confirm))); });
   const askNote = el('p', { class: 'muted' });
-  api.get('/api/voice').then(shownConfirm).catch((e) => { askNote.textContent = e.message; });
+  api.get(paths.voice).then(shownConfirm).catch((e) => { askNote.textContent = e.message; });
   const panel = el('section', { class: 'panel', 'aria-label': 'Microphone' }, el('h2', {}, 'Microphone'),
     el('div', { class: 'row' }, button), state,
     el('div', { class: 'row setting', role: 'group', 'aria-label': 'When a task is heard' }, el('span', { class: 'label' }, 'When a task is heard'), askFirst),
@@ -103,16 +103,16 @@ export default {
     const word = el('input', { type: 'text', 'aria-label': 'Word or phrase', placeholder: 'give me the red can', maxlength: '80' });
     const learnNote = el('p', { class: 'muted' });
     const refresh = async () => {
-      const { words } = await api.get('/api/words');
+      const { words } = await api.get(paths.words);
       // without the voice service the words are still listed; only the learned sayings are missing
-      const learned = await api.get('/api/voice/learned').then((r) => { learnNote.textContent = ''; return r; })
+      const learned = await api.get(paths.learnedWords).then((r) => { learnNote.textContent = ''; return r; })
         .catch((e) => { learnNote.textContent = e.message; return { words: {}, phrases: {} }; });
       const sayings = (w) => learned.words[learned.phrases[w]] || [];
       list.replaceChildren(...(words.length ? words.map((w) => wordRow(w, sayings(w), refresh))
         : [el('li', { class: 'muted' }, 'No words yet.')]));
     };
     const add = () => attempt(async () => {
-      const r = await api.post('/api/words', { text: word.value.trim() });
+      const r = await api.post(paths.words, { text: word.value.trim() });
       word.value = '';
       await refresh();
       return r;

@@ -1,5 +1,5 @@
 // Video tab: the commanded robot's cameras (simulated or real: any camera on the bus), live.
-import { api, chosenRobot } from '../api.js';
+import { api, paths } from '../api.js';
 import { el, notify } from '../ui.js';
 
 export default {
@@ -13,9 +13,9 @@ export default {
       shown = robot ? robot.id : null;
       if (!robot) { grid.replaceChildren(el('p', { class: 'muted' }, 'Choose a robot in the Connection Manager.')); return; }
       heading.textContent = `Cameras of ${robot.id}`;
-      const { cameras } = await api.get(`/api/robots/${robot.id}/cameras`);
+      const { cameras } = await api.get(paths.robot.cameras(robot.id));
       grid.replaceChildren(...(cameras.length ? cameras.map((name) => el('figure', {},
-        el('img', { src: `/api/robots/${robot.id}/cameras/${encodeURIComponent(name)}.mjpg`, alt: `Live image of the ${name} camera` }),
+        el('img', { src: paths.robot.camera(robot.id, name), alt: `Live image of the ${name} camera` }),
         el('figcaption', {}, name))) : [el('p', { class: 'muted' }, `${robot.id} has no camera sending images.`)]));
     };
     root.replaceChildren(el('section', { class: 'panel', 'aria-label': 'Video' }, heading, grid));

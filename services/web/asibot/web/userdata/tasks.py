@@ -1,0 +1,107 @@
+"""Tasks, what the Launcher shows as buttons: `<task>.task`, 3 lines: the program (no .py), its
+words (several joined by ";") and its icon's file name."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from asibot.files import fsync_dir, write_atomic
+from asibot.web.userdata.errors import NotFound, UserDataError
+from asibot.web.userdata.folder import Folder, decode, log
+from asibot.web.userdata.names import CONTROL_RE, need_str, quote
+from asibot.web.userdata.words import check_word
+
+MAX_TASK_BYTES = 4096
+
+
+@dataclass
+class Task:
+    """What the Launcher shows as one button: run `program`, also on any of `words`."""
+
+    name: str
+    program: str
+    words: list[str]
+    icon: str
+
+
+def check_task_name(name: object) -> str:
+    """Task names are what people read on the Launcher, so spaces are fine; the file name
+    `<name>.task` must stay inside the folder and visible."""
+    if isinstance(name, str):
+        name = name.strip()
+    name = need_str("task name", name)
+    if "/" in name or "\\" in name or ".." in name or name.startswith(".") or CONTROL_RE.search(name):
+        raise UserDataError(f"The task name {quote(name)} may not hold /, \\, .., control characters "
+                            "or start with a dot.")
+    return name
+
+
+def check_task_words(words: object) -> list[str]:
+    """A task's words: each a word (check_word), each once."""
+    if not isinstance(words, (list, tuple)):
+        raise UserDataError(f"The task's words must be a list; got {quote(words)}.")
+    return list(dict.fromkeys(check_word(w) for w in words))
+
+
+def parse_task(name: str, text: str) -> Task:
+    lines = text.splitlines()
+    while lines and not lines[-1].strip():
+        lines.pop()
+    if len(lines) != 3:
+        raise UserDataError(f"The task file {quote(name + '.task')} must have 3 lines "
+                            f"(program, words, icon); it has {len(lines)}.")
+    program = lines[0].strip().removesuffix(".py")
+    words = [w.strip() for w in lines[1].split(";") if w.strip()]
+    return Task(name, program, words, lines[2].strip())
+
+
+def task_text(program: str, words: list[str], icon: str) -> bytes:
+    return f"{program}\n{';'.join(words)}\n{icon}\n".encode()
+
+
+class Tasks:
+    """The .task files of one folder. That a task's program, icon and words exist is checked
+    by UserData, which knows them all."""
+
+    def __init__(self, folder: Folder) -> None:
+        self.folder = folder
+
+    def path(self, name: str) -> Path:
+        return self.folder.root / f"{check_task_name(name)}.task"
+
+    def all(self) -> list[Task]:
+        """The tasks, sorted by name; a broken .task file is left out (and logged)."""
+        out = []
+        for path in sorted(self.folder.root.glob("*.task")):
+            try:
+                out.append(self.get(path.stem))
+            except UserDataError as e:
+                log.warning("%s left out: %s", path.name, e)
+        return out
+
+    def get(self, name: str) -> Task:
+        path = self.path(name)
+        if not path.is_file():
+            raise NotFound(f"There is no task named {quote(name)}.")
+        return parse_task(path.stem, decode(path.read_bytes())[0])
+
+    def write(self, path: Path, program: str, words: list[str], icon: str) -> Task:
+        """Write the task at `path` (`path(name)`: its name checked) as it is given."""
+        write_atomic(path, task_text(program, words, icon))
+        return Task(path.stem, program, words, icon)
+
+    def follow_program(self, old: str, new: str) -> None:
+        """The tasks that ran program `old` run `new`, renamed from it."""
+        for t in self.all():  # rewritten as they are: a task whose icon went stays as it was
+            if t.program == old:
+                write_atomic(self.path(t.name), task_text(new, t.words, t.icon))
+
+    def delete(self, name: str) -> None:
+        """Move a task to the trash."""
+        path = self.path(name)
+        if not path.is_file():
+            raise NotFound(f"There is no task named {quote(name)}.")
+        os.rename(path, self.folder.trash_dir / f"{self.folder.trash_stamp()}-{path.name}")
+        fsync_dir(self.folder.root)
