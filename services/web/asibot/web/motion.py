@@ -115,18 +115,15 @@ class Motion:
         return self._call(robot, "jog", axis=axis, step=float(step), level=level)
 
     def hold_velocity(self, space: str, axis: int, direction: int, level: int, n_joints: int) -> list[float]:
-        """The velocity one held jog button streams: one axis (or joint) at the level's speed."""
+        """The velocity one held jog button streams: one axis (or joint) at the level's speed.
+        The page's message was checked once, where it was read (asibot.web.page_messages.Hold)."""
         size = n_joints if space == "joint" else len(POINT_AXES)
-        if space not in ("joint", "cartesian"):
-            raise RpcError("bad_request", f"The space must be 'joint' or 'cartesian'; got {space!r}.")
-        if not _whole(axis) or not 0 <= axis < size:
-            raise RpcError("bad_request", f"The axis must be 0 to {size - 1}; got {axis!r}.")
         if space == "joint":
             top = self.settings.hold_joint
         else:
             top = self.settings.hold_linear if axis < 3 else self.settings.hold_angular
         v = [0.0] * size
-        v[axis] = _direction(direction) * top * _level(level)
+        v[axis] = direction * top * SPEED_LEVELS[level - 1]
         return v
 
     def hold(self, robot: str, space: str, axis: int, direction: int, level: int) -> dict:
