@@ -21,6 +21,7 @@ import numpy as np
 from asibot.safety import estop, identity
 from asibot import keys, messages
 from asibot.bus import MEMORY_SCHEME, ROUTER_ENV, Bus, open_router
+from asibot.safety.driver_contract import DriverContract, command
 from asibot.safety.ownership import Holder
 from asibot.errors import MessageError
 from asibot.safety.identity import Identity
@@ -181,14 +182,15 @@ def wait_until(predicate: Callable[[], object], timeout: float = 5.0, interval: 
 
 
 class IdealDriver:
-    """An ideal arm driver: an integrator that keeps the driver contract (arm/state and
-    gripper/state at 100 Hz, obeys arm/command in position mode within the joint limits and max
-    velocities, from the controller that holds the robot only (asibot.safety.ownership; the others'
-    go to `refused`), announces driver_alive) for the robot `robot` of catalog entry `spec`
-    (asibot.robots.RobotSpec). Starts at spec.home; `set_joints(q)` teleports it (rad).
-    The fingers move at 0.1 m/s and stop on an object of width `object_width` (m) if set;
-    with `gripper_start_delay` (s) they start only that long after each gripper command, as
-    a slow gripper or a loaded machine does (and never, while it is `math.inf`)."""
+    """An ideal arm driver behind the driver contract (asibot.safety.driver_contract), as the
+    CANopen driver and the sim are: an integrator that publishes arm/state and gripper/state at
+    100 Hz and obeys arm/command in position mode within the joint limits and max velocities,
+    from the controller that holds the robot only, holding still while the estop is engaged,
+    for the robot `robot` of catalog entry `spec` (asibot.robots.RobotSpec). Starts at
+    spec.home; `set_joints(q)` teleports it (rad). The fingers move at 0.1 m/s and stop on an
+    object of width `object_width` (m) if set; with `gripper_start_delay` (s) they start only
+    that long after each gripper command, as a slow gripper or a loaded machine does (and
+    never, while it is `math.inf`)."""
 
     def __init__(self, robot: str, spec: Any) -> None:
         self.spec = spec
@@ -196,8 +198,6 @@ class IdealDriver:
         self.target = self.q.copy()
         self.vmax = np.asarray(spec.max_velocity, float)
         self.commands: list[ArmCommand] = []
-        #: Commands from a sender that does not hold the robot: refused, never obeyed.
-        self.refused: list[ArmCommand | GripperCommand] = []
         self.gripper = 0.0
         self.gripper_target = 0.0
         #: Width of an object between the fingers (m), or None: closing stops on it.
@@ -205,35 +205,47 @@ class IdealDriver:
         #: How long after a gripper command the fingers start to move, s.
         self.gripper_start_delay = 0.0
         self._grip_pending: tuple[float, float] | None = None  # (opening, when commanded)
+        self._estop = False
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self.bus = Bus("ideal-driver")
         self.pub = self.bus.publisher(keys.arm_state(robot), ArmState)
         self.grip_pub = self.bus.publisher(keys.gripper_state(robot), GripperState)
-        self.holder = Holder(robot, "arm")
-        self.holder.follow(self.bus)
-        self.bus.subscribe(keys.arm_command(robot), ArmCommand, self._on_command)
-        self.bus.subscribe(keys.gripper_command(robot), GripperCommand, self._on_grip)
-        self.token = self.bus.announce(keys.driver_alive(robot))
+        self.contract = DriverContract(self.bus, robot)
+        self.contract.serve([command("arm", self._obey_arm), command("gripper", self._obey_grip)],
+                            on_holder=lambda part, holder: None, on_estop=self._on_estop,
+                            status=lambda: {"estop": self._estop}, reset_fault=dict)
         self.thread = threading.Thread(target=self._run, name="ideal-driver", daemon=True)
         self.thread.start()
 
-    def _on_command(self, cmd: ArmCommand) -> None:
-        if self.holder.refusal(cmd) is not None:
-            with self._lock:
-                self.refused.append(cmd)
-            return
-        if cmd.mode == "position" and len(cmd.values) == len(self.q):
-            with self._lock:
-                self.commands.append(cmd)
-                self.target = np.clip(cmd.values, self.spec.lower, self.spec.upper)
+    @property
+    def holder(self) -> Holder:
+        """Who holds the arm, as the driver sees it."""
+        return self.contract.holders["arm"]
 
-    def _on_grip(self, cmd: GripperCommand) -> None:
+    def _obey_arm(self, cmd: ArmCommand) -> None:
+        """`commands`: every position command of the holder, obeyed or refused by the estop."""
+        if cmd.mode != "position" or len(cmd.values) != len(self.q):
+            return
         with self._lock:
-            if self.holder.refusal(cmd) is not None:
-                self.refused.append(cmd)
-                return
+            self.commands.append(cmd)
+            if self._estop:
+                raise ValueError("the estop is engaged")   # refused by the stop: counted, no Event
+            self.target = np.clip(cmd.values, self.spec.lower, self.spec.upper)
+
+    def _obey_grip(self, cmd: GripperCommand) -> None:
+        if self._estop:
+            raise ValueError("the estop is engaged")   # refused by the stop: counted, no Event
+        with self._lock:
             self._grip_pending = (cmd.opening, time.monotonic())
+
+    def _on_estop(self, engaged: bool, reason: str, by: str) -> None:
+        with self._lock:
+            self._estop = engaged
+            if engaged:                      # hold where it is, as the drivers do
+                self.target = self.q.copy()
+                self._grip_pending = None
+                self.gripper_target = self.gripper
 
     def set_joints(self, q) -> None:
         """Put the arm at q (rad) at once, holding there."""
