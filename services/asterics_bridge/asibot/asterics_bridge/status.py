@@ -113,18 +113,15 @@ class StatusBoard:
         self._lock = threading.Lock()
         self._robots: dict[str, RobotStatus] = {}
         self.on_notice = on_notice
-        self.bus = bus
-        self._subscriptions = [
-            bus.subscribe(keys.every_robot(keys.events), m.Event, self._on_event, with_key=True, maxsize=200),
-            bus.subscribe(keys.every_robot(keys.nav_status), m.NavStatus, self._on_nav, with_key=True, maxsize=50),
-            bus.subscribe(keys.every_robot(keys.base_odom), m.Odometry, self._on_odom, with_key=True,
-                          maxsize=1),
-            bus.subscribe(keys.every_robot(keys.nav_pose), m.NavPose, self._on_pose, with_key=True,
-                          maxsize=1),
-            bus.subscribe(keys.every_robot(keys.base_battery), m.Battery, self._on_battery, with_key=True,
-                          maxsize=1),
-            bus.subscribe(keys.every_robot(keys.estop), m.EStop, self._on_estop, with_key=True),
-        ]
+        bus.subscribe(keys.every_robot(keys.events), m.Event, self._on_event, with_key=True, maxsize=200)
+        bus.subscribe(keys.every_robot(keys.nav_status), m.NavStatus, self._on_nav, with_key=True, maxsize=50)
+        bus.subscribe(keys.every_robot(keys.base_odom), m.Odometry, self._on_odom, with_key=True,
+                      maxsize=1)
+        bus.subscribe(keys.every_robot(keys.nav_pose), m.NavPose, self._on_pose, with_key=True,
+                      maxsize=1)
+        bus.subscribe(keys.every_robot(keys.base_battery), m.Battery, self._on_battery, with_key=True,
+                      maxsize=1)
+        bus.subscribe(keys.every_robot(keys.estop), m.EStop, self._on_estop, with_key=True)
 
     def robot(self, robot: str) -> RobotStatus:
         with self._lock:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any, Sequence, TypeGuard
 
 from asibot.safety import estop
 from asibot import keys, robots
@@ -51,19 +51,21 @@ class JogSettings:
                 "point_axes": [{"name": n, "unit": u} for n, u in POINT_AXES]}
 
 
-def _whole(value: object) -> bool:
+def whole(value: object) -> TypeGuard[int]:
     """An int that is not a bool (JSON's `true` is not the number 1 here)."""
     return isinstance(value, int) and not isinstance(value, bool)
 
 
-def _level(level: int) -> float:
-    if not _whole(level) or not 1 <= level <= len(SPEED_LEVELS):
+def speed_fraction(level: int) -> float:
+    """The fraction of the top speed that speed level `level` (1 to 5) moves at."""
+    if not whole(level) or not 1 <= level <= len(SPEED_LEVELS):
         raise RpcError("bad_request", f"The speed level must be 1 to {len(SPEED_LEVELS)}; got {level!r}.")
     return SPEED_LEVELS[level - 1]
 
 
-def _direction(direction: int) -> int:
-    if not _whole(direction) or direction not in (-1, 1):
+def check_direction(direction: int) -> int:
+    """-1 or 1, else a bad_request with the sentence the page shows."""
+    if not whole(direction) or direction not in (-1, 1):
         raise RpcError("bad_request", f"The direction must be -1 or 1; got {direction!r}.")
     return direction
 
@@ -95,20 +97,20 @@ class Motion:
         """Move one joint (0 for the first) by one step, deg: one `jog` of the kinematics
         service, which adds it to the previous step's target while that one still moves."""
         n = self._joints(robot)
-        if not _whole(joint) or not 0 <= joint < n:
+        if not whole(joint) or not 0 <= joint < n:
             raise RpcError("bad_request", f"The joint must be 0 to {n - 1} (this arm has {n}); got {joint!r}.")
-        delta = _direction(direction) * (self.settings.joint_step if step is None else step)
+        delta = check_direction(direction) * (self.settings.joint_step if step is None else step)
         return self._jog(robot, jog_axes(n)[joint], delta, level)
 
     def step_axis(self, robot: str, axis: int, direction: int, level: int, step: float | None = None) -> dict:
         """Move the tool one step along (or about) one axis of the point: one `jog` of the
         kinematics service (a movl), which adds it to the previous step's target while that
         one still moves."""
-        if not _whole(axis) or not 0 <= axis < len(POINT_AXES):
+        if not whole(axis) or not 0 <= axis < len(POINT_AXES):
             raise RpcError("bad_request", f"The axis must be 0 to {len(POINT_AXES) - 1} (x, y, z, rot(y'), rot(z'')); got {axis!r}.")
         if step is None:
             step = self.settings.linear_step if axis < 3 else self.settings.angular_step
-        return self._jog(robot, POINT_AXES[axis][0], _direction(direction) * step, level)
+        return self._jog(robot, POINT_AXES[axis][0], check_direction(direction) * step, level)
 
     def _jog(self, robot: str, axis: str, step: float, level: int) -> dict:
         """One step: the kinematics `jog` verb checks the step and the level and keeps the target."""
@@ -162,23 +164,23 @@ class Motion:
             if kind != "movj":
                 raise RpcError("bad_request", "Joint values move with movj; movl takes a point.")
             if relative:
-                return self._call(robot, "relj", joints=values, speed=_level(level))
-            return self._call(robot, "movj", joints=values, speed=_level(level))
+                return self._call(robot, "relj", joints=values, speed=speed_fraction(level))
+            return self._call(robot, "movj", joints=values, speed=speed_fraction(level))
         if relative:
             here = self._call(robot, "stat")["point"]
             if len(values) != len(here):
                 raise RpcError("bad_request", f"An offset needs {len(here)} numbers; got {len(values)}.")
             values = [a + b for a, b in zip(here, values)]
         if kind == "movl":
-            return self._call(robot, "movl", point=values, speed=STEP_LINEAR_SPEED * _level(level))
-        return self._call(robot, "movj", point=values, speed=_level(level))
+            return self._call(robot, "movl", point=values, speed=STEP_LINEAR_SPEED * speed_fraction(level))
+        return self._call(robot, "movj", point=values, speed=speed_fraction(level))
 
     def inverse(self, robot: str, point: Sequence[float]) -> list[float]:
         """Joints (deg) that put the tool at `point`; nothing moves."""
         return self._call(robot, "inv", point=[float(v) for v in point])["joints"]
 
     def home(self, robot: str, level: int = 3) -> dict:
-        return self._call(robot, "home", speed=_level(level))
+        return self._call(robot, "home", speed=speed_fraction(level))
 
     def stop(self, robot: str) -> dict:
         return self._call(robot, "stop")

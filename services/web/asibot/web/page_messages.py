@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from typing import Annotated, Any, Collection, Literal, TypeGuard
+from typing import Annotated, Any, Callable, Collection, Literal
 
 from pydantic import (BaseModel, ConfigDict, Field, InstanceOf, TypeAdapter, ValidationError, ValidationInfo,
                       field_validator, model_validator)
@@ -21,7 +21,7 @@ from pydantic_core import PydanticCustomError
 from asibot import robots
 from asibot.errors import CODES, RpcError
 from asibot.poses import POINT_AXES
-from asibot.jog import SPEED_LEVELS
+from asibot.web.motion import check_direction, speed_fraction, whole
 from asibot.web.pointer import DeviceReading
 from asibot.web.voice_relay import MicError, check_rate
 
@@ -54,9 +54,13 @@ def _refuse(code: str, sentence: str) -> PydanticCustomError:
     return PydanticCustomError(code, "{sentence}", {"sentence": sentence})
 
 
-def _whole(value: object) -> TypeGuard[int]:
-    """An int that is not a bool (JSON's `true` is not the number 1 here)."""
-    return isinstance(value, int) and not isinstance(value, bool)
+def _checked(check: Callable[[Any], object], value: object) -> object:
+    """`value`, once Motion's own check (and its sentence) accepts it."""
+    try:
+        check(value)
+    except RpcError as exc:
+        raise _refuse(exc.code, exc.message) from None
+    return value
 
 
 class _Message(BaseModel):
@@ -115,23 +119,19 @@ class Hold(_ToRobot):
         if robot is None or space is None:
             return axis     # the robot or the space was refused: that is the sentence
         size = len(robots.get(robot).joint_names) if space == "joint" else len(POINT_AXES)
-        if not _whole(axis) or not 0 <= axis < size:
+        if not whole(axis) or not 0 <= axis < size:
             raise _refuse("bad_request", f"The axis must be 0 to {size - 1}; got {axis!r}.")
         return axis
 
     @field_validator("direction", mode="before")
     @classmethod
     def _direction(cls, direction: object) -> object:
-        if not _whole(direction) or direction not in (-1, 1):
-            raise _refuse("bad_request", f"The direction must be -1 or 1; got {direction!r}.")
-        return direction
+        return _checked(check_direction, direction)
 
     @field_validator("level", mode="before")
     @classmethod
     def _level(cls, level: object) -> object:
-        if not _whole(level) or not 1 <= level <= len(SPEED_LEVELS):
-            raise _refuse("bad_request", f"The speed level must be 1 to {len(SPEED_LEVELS)}; got {level!r}.")
-        return level
+        return _checked(speed_fraction, level)
 
 
 class Point(_ToRobot):
