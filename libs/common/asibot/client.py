@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import os
 import time
-from typing import Sequence
+from typing import Self, Sequence
 
 from asibot.safety import estop
 from asibot import keys
@@ -35,9 +35,19 @@ class _Client:
         self.robot: str | None = None
         self.timeout = timeout
         self._bus: Bus | None = None
+        self._owns_bus = True
         self._me = Identity("program")   # signs its estops and releases (asibot.safety.estop)
         if robot:
             self.open(robot)
+
+    @classmethod
+    def on(cls, bus: Bus, robot: str, timeout: float = CALL_TIMEOUT) -> Self:
+        """A client of `robot` over a bus its caller owns (a service's: the web, the bridge),
+        without waiting for the service: a call while it is not there raises Unavailable.
+        `close` leaves that bus open."""
+        client = cls(timeout=timeout)
+        client._bus, client._owns_bus, client.robot = bus, False, robot.strip("/")
+        return client
 
     def _key(self, verb: str) -> str:
         raise NotImplementedError
@@ -53,9 +63,9 @@ class _Client:
         return True
 
     def close(self) -> None:
-        if self._bus is not None:
+        if self._bus is not None and self._owns_bus:
             self._bus.close()
-            self._bus = None
+        self._bus = None
 
     def __enter__(self):
         return self

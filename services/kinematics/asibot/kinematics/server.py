@@ -28,7 +28,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from asibot import keys
+from asibot import keys, verbs
 from asibot.jog import SPEED_LEVELS, STEP_LINEAR_SPEED, axes as jog_axes
 from asibot.safety import ownership
 from asibot.errors import RpcError
@@ -36,6 +36,7 @@ from asibot.safety.estop import EStopState
 from asibot.messages import ArmCommand, ArmState, CartState, EStop, Event, GripperCommand, GripperState
 from asibot.runtime import Service
 from asibot.timing import Ticker
+from asibot.verbs import Verb
 
 from . import requests
 from .controller import MOVJ, MOVJV, MOVL, MOVV, POINTER, Controller
@@ -98,24 +99,19 @@ class KinematicsServer(Service):
         # The table of requests is the list of verbs: each is served by the method of its name,
         # which receives the checked arguments.
         self.verbs = requests.verbs(self.n)
-        for verb, spec in self.verbs.items():
-            bus.serve(keys.cart_rpc(robot, verb), self._handler(verb, spec, getattr(self, verb)))
+        verbs.serve(bus, lambda verb: keys.cart_rpc(robot, verb), self.verbs,
+                    {verb: getattr(self, verb) for verb in self.verbs}, before=self._before)
         self.me.announce(bus)
         self._loop = threading.Thread(target=self._run, name="control-loop", daemon=True)
         self._loop.start()
 
-    def _handler(self, verb: str, spec: requests.Verb, method: Callable[[Any], dict]) -> Callable[[dict], dict]:
-        """The bus handler of `verb`: check the request, wait for the driver if the verb
-        needs it, then call `method(args)`."""
-        def run(req: dict) -> dict:
-            args = spec.parse(verb, req)
-            if spec.needs_driver:
-                deadline = time.monotonic() + DRIVER_GRACE
-                while not (self.ctl.driver_alive and self.ctl.q is not None) and time.monotonic() < deadline:
-                    time.sleep(0.02)
-                self.hold.wait(deadline)
-            return method(args)
-        return run
+    def _before(self, verb: str, spec: Verb, args: object) -> None:
+        """Before a verb that needs the driver: wait a moment for it and for its holder."""
+        if spec.needs_driver:
+            deadline = time.monotonic() + DRIVER_GRACE
+            while not (self.ctl.driver_alive and self.ctl.q is not None) and time.monotonic() < deadline:
+                time.sleep(0.02)
+            self.hold.wait(deadline)
 
     # --- bus inputs ---------------------------------------------------------------------
     def _on_arm_state(self, msg: ArmState) -> None:
