@@ -104,6 +104,7 @@ def test_while_another_program_holds_the_base_nav_says_so_at_once(memory_bus, ap
             assert asked == [], "nav waited for the driver to name it, though another program held the base"
             assert not svc.pilot._driving
             nav.primitive("stop")                     # a stop is always taken
+            nav.primitive(" Stop ")                   # in any case and spacing
             bus.call(keys.nav_rpc(ROBOT, "localize"), {}, timeout=5)   # forgetting where it is drives nothing
     finally:
         svc.close()

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import os
 import time
-from typing import Self, Sequence
+from typing import Self, Sequence, TypedDict, cast
 
 from asibot.safety import estop
 from asibot import keys
@@ -206,15 +206,49 @@ class NavClient(_Client):
 
     _probe, _service = "status", "nav"
 
+    class Trip(TypedDict):
+        """A goal just started: its id, the place's name as nav knows it ("" for a pose), the
+        goal [x, y, theta] (m, m, rad, map frame) and the sentence."""
+        goal_id: int
+        place: str
+        goal: list[float]
+        text: str
+
+    class Result(TypedDict):
+        """How a goal goes or ended: its state ("active", "succeeded", "aborted", "canceled",
+        "preempted", or "idle" before any goal), the sentence, the distance left (m) and the
+        recoveries tried."""
+        goal_id: int
+        state: str
+        text: str
+        place: str
+        distance: float
+        recoveries: int
+
+    class Place(TypedDict):
+        """A named place as nav keeps it: its name (tidied: single spaces) and pose [x, y, theta]."""
+        name: str
+        pose: list[float]
+
+    class Levels(TypedDict):
+        """The primitives' speed and width levels (1 to 5) and the sentence that says them."""
+        text: str
+        speed: int
+        width: int
+
     def _key(self, verb: str) -> str:
         return keys.nav_rpc(self._opened(), verb)
 
     def goto(self, target: str | Sequence[float]) -> int:
         """Go to a named place ("fridge") or a pose (x, y, theta in m, m, rad, map frame);
         returns the goal's id at once."""
+        return self.goto_reply(target)["goal_id"]
+
+    def goto_reply(self, target: str | Sequence[float]) -> Trip:
+        """`goto`, answering the whole Trip (what a page shows), not only the goal's id."""
         if isinstance(target, str):
-            return self._call("goto", place=target)["goal_id"]
-        return self._call("goto", pose=list(target))["goal_id"]
+            return cast(NavClient.Trip, self._call("goto", place=target))
+        return cast(NavClient.Trip, self._call("goto", pose=list(target)))
 
     def wait(self, goal_id: int | None = None, timeout: float | None = None) -> dict:
         """Block until goal `goal_id` (default: whatever drives the base now) ends; its result
@@ -234,9 +268,9 @@ class NavClient(_Client):
         code = "unreachable" if r["state"] == "aborted" else "estop" if "emergency stop" in r["text"] else "busy"
         raise RpcError(code, r["text"][:1].upper() + r["text"][1:])
 
-    def cancel(self, goal_id: int | None = None) -> dict:
-        """Cancel the running goal (or `goal_id`, if it is the one running)."""
-        return self._call("cancel", goal_id=goal_id)
+    def cancel(self, goal_id: int | None = None) -> Result:
+        """Cancel the running goal (or `goal_id`, if it is the one running); how it ended."""
+        return cast(NavClient.Result, self._call("cancel", goal_id=goal_id))
 
     def stop(self) -> None:
         """Stop whatever drives the base: a goal or a primitive."""
@@ -255,14 +289,21 @@ class NavClient(_Client):
         return {p["name"]: p["pose"] for p in self._call("places")["places"]}
 
     def save_place(self, name: str, pose: Sequence[float] | None = None, replace: bool = False) -> list[float]:
-        """Save a place where the robot stands (or at `pose`); `replace` moves an existing one."""
-        return self._call("save_place", name=name, pose=pose, replace=replace or None)["pose"]
+        """Save a place where the robot stands (or at `pose`); `replace` moves an existing one.
+        Its pose."""
+        return self.save_place_reply(name, pose, replace)["pose"]
 
-    def rename_place(self, name: str, new_name: str) -> None:
-        self._call("rename_place", name=name, new_name=new_name)
+    def save_place_reply(self, name: str, pose: Sequence[float] | None = None, replace: bool = False) -> Place:
+        """`save_place`, answering the Place as nav keeps it (its name tidied), not only its pose."""
+        return cast(NavClient.Place, self._call("save_place", name=name, pose=pose, replace=replace or None))
 
-    def remove_place(self, name: str) -> None:
-        self._call("remove_place", name=name)
+    def rename_place(self, name: str, new_name: str) -> Place:
+        """Give place `name` (any case and spacing) the name `new_name`; the place renamed."""
+        return cast(NavClient.Place, self._call("rename_place", name=name, new_name=new_name))
+
+    def remove_place(self, name: str) -> str:
+        """Forget place `name` (any case and spacing); its name as nav knew it."""
+        return self._call("remove_place", name=name)["name"]
 
     def drive(self, distance: float) -> str:
         """Drive straight `distance` m (negative: backwards), stopping before obstacles."""
@@ -276,6 +317,11 @@ class NavClient(_Client):
         """One of the thesis's driving primitives ("forward", "turn left 90", "curve forward
         left", ...); `continuous` goes on until stop()."""
         return self._call("primitive", name=name, continuous=continuous or None)["text"]
+
+    def settings(self, change: str | None = None) -> Levels:
+        """One level "faster", "slower", "wider" or "narrower" (asibot.driving.CHANGES) of the
+        primitives' speed or width; without `change`, the levels now."""
+        return cast(NavClient.Levels, self._call("settings", change=change))
 
     def set_pose(self, pose: Sequence[float]) -> None:
         """Tell localisation where the robot is (x, y, theta in m, m, rad, map frame)."""

@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import os
 
+from asibot import driving
 from asibot.client import NavClient
 
 DEFAULT_ROBOT = "pioneer-sim"
@@ -99,7 +100,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         d = verbs.add_parser(name, help=f"{what} ({unit})")
         d.add_argument("amount", type=float)
         d.add_argument("--no-wait", action="store_true")
-    pr = verbs.add_parser("primitive", help='a driving primitive: "forward", "turn left 90", ...')
+    pr = verbs.add_parser("primitive", help=f"a driving primitive: {', '.join(driving.PRIMITIVES)}")
     pr.add_argument("name")
     pr.add_argument("--no-wait", action="store_true")
     verbs.add_parser("stop", help="stop whatever drives the robot")

@@ -220,8 +220,8 @@ class Navigator:
             return self._start_recovery(now, pose, label, f"no progress for {self.params.progress_timeout:.0f} s")
         speed = max(abs(velocity[0]), self.params.nominal_speed if now - self.status.started < 2 else 0.1)
         self.status.eta = ctl.remaining / speed
-        self.status.text = ctl.text + f" ({label})" if ctl.text and ctl.text != "arrived" else \
-            f"driving to {label}, {ctl.remaining:.1f} m left"
+        # a moving controller says what it does only when it is not simply following the path
+        self.status.text = f"{ctl.text} ({label})" if ctl.text else f"driving to {label}, {ctl.remaining:.1f} m left"
         return Command(ctl.vx, ctl.wz)
 
     # --------------------------------------------------------------------------- helpers

@@ -29,12 +29,12 @@ import bisect
 import math
 from collections import deque
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
 from asibot import messages as m
-from asibot.errors import RpcError, quote
+from asibot.errors import RpcError
 from asibot.nav.amcl import Amcl, AmclParams
 from asibot.nav.costmap import Costmap
 from asibot.nav.errors import NavError
@@ -243,28 +243,22 @@ class Pilot:
         s = self.navigator.status
         return {"goal_id": gid, "place": label, "goal": list(goal), "text": s.text}
 
-    def cancel(self, now: float, goal_id: object = None) -> dict:
-        if goal_id is not None and (isinstance(goal_id, bool) or not isinstance(goal_id, int)):
-            raise NavError(f"goal_id must be a whole number; got {quote(goal_id, 30)}.")
+    def cancel(self, now: float, goal_id: int | None = None) -> dict:
         s = self.navigator.cancel(now, goal_id)
         self._tell_goal_end()
         return _result(s)
 
-    def result(self, goal_id: object) -> dict:
-        if isinstance(goal_id, bool) or not isinstance(goal_id, int):
-            raise NavError(f"goal_id must be a whole number; got {quote(goal_id, 30)}.")
+    def result(self, goal_id: int) -> dict:
         return _result(self.navigator.result(goal_id))
 
-    def drive(self, now: float, name: object, continuous: bool = False, amount: float | None = None) -> dict:
-        """Start a primitive (or `stop`); ends the running goal first."""
+    def drive(self, now: float, name: str, continuous: bool = False, amount: float | None = None) -> dict:
+        """Start a primitive (or `stop`), named as asibot.driving spells it; ends the running goal first."""
         if name == "stop":
             return self.stop(now)
         self._may_move("driving")
         odom = self._fresh_odom(now)
         if odom is None:
             raise RpcError("unavailable", "No odometry from the base: is the base driver (or the sim) running?")
-        if not isinstance(continuous, bool):
-            raise NavError(f"continuous must be true or false; got {quote(continuous, 30)}.")
         text = self.primitives.start(now, name, odom.pose, continuous, amount)   # raises on a bad name
         if self.navigator.status.state == ACTIVE:
             self.navigator.cancel(now)
@@ -277,28 +271,20 @@ class Pilot:
         self._end_everything(now, "")
         return {"text": "stopped"}
 
-    def settings(self, change: object) -> dict:
-        """faster / slower / wider / narrower: one level of the primitives' speed or width."""
+    def settings(self, change: str | None) -> dict:
+        """One level of the primitives' speed or width (asibot.driving.CHANGES: faster, slower,
+        wider, narrower); None: the levels now."""
         prim = self.primitives
         actions = {"faster": prim.faster, "slower": prim.slower, "wider": prim.wider, "narrower": prim.narrower}
-        if change is None:
-            text = f"speed {prim.settings.speed}, width {prim.settings.width}"
-        elif change not in actions:
-            raise NavError(f"{quote(change, 30)} is not a setting change; use one of {', '.join(actions)}.")
-        else:
-            text = actions[change]()
+        text = actions[change]() if change is not None else f"speed {prim.settings.speed}, width {prim.settings.width}"
         return {"text": text, "speed": prim.settings.speed, "width": prim.settings.width}
 
-    def set_pose(self, now: float, pose: object, cov: object = None) -> dict:
+    def set_pose(self, now: float, pose: object, cov: Sequence[float] | None = None) -> dict:
         """"I am here": restart the filter around `pose` (any running goal ends: the way there was
-        planned from a pose that was wrong)."""
+        planned from a pose that was wrong); `cov`: the variances [xx, yy, theta-theta] (m^2,
+        m^2, rad^2) of the guess, the filter's defaults when None."""
         p = as_pose(pose, "pose")
-        variances: tuple[float, float, float] | None = None
-        if cov is not None:
-            if not isinstance(cov, (list, tuple)) or len(cov) != 3 or not all(
-                    isinstance(v, (int, float)) and not isinstance(v, bool) for v in cov):
-                raise NavError("cov must be three variances [xx, yy, theta-theta] (m^2, m^2, rad^2).")
-            variances = (float(cov[0]), float(cov[1]), float(cov[2]))
+        variances = (float(cov[0]), float(cov[1]), float(cov[2])) if cov is not None else None
         self.amcl.set_pose(p, variances)   # raises on a pose off the map, changing nothing
         self._end_everything(now, "my position was set again")
         self._scan_used = False      # the next scan corrects the new guess at once

@@ -1,9 +1,10 @@
 """The thesis's driving primitives, closed-loop on odometry, stopping before obstacles.
 
-For a user driving with one switch or a head tracker, each primitive is one command:
-forward, backward, turn left, turn right, stop, turn around, turn left 90, turn right 90,
-curve forward left/right, curve backward left/right. Two settings shape them, raised and
-lowered by the user one level at a time (1..5):
+For a user driving with one switch or a head tracker, each primitive is one command, named
+as in `asibot.driving.PRIMITIVES` (the names nav, the web and the bridge share): forward,
+backward, turn left, turn right, turn left 90, turn right 90, turn around, curve forward
+left/right, curve backward left/right, stop. Two settings shape them, raised and lowered by
+the user one level at a time (1..5):
 
 - speed (faster / slower): the linear and turning speeds;
 - width (wider / narrower): how far a step goes, how much a turn step turns, and how wide a
@@ -24,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from asibot import driving
 from asibot.messages import LaserScan
 from asibot.errors import quote
 from asibot.nav.errors import NavError
@@ -55,6 +57,10 @@ PRIMITIVES: dict[str, tuple[int, int, str, float | None]] = {
     "curve backward right": (-1, -1, "curve", None),
     "stop": (0, 0, "stop", None),
 }
+if tuple(PRIMITIVES) != driving.PRIMITIVES:
+    # The web draws, and the bridge sends, the names of asibot.driving: nav must drive those.
+    raise RuntimeError(f"asibot.nav.primitives drives {list(PRIMITIVES)}, "
+                       f"but asibot.driving names {list(driving.PRIMITIVES)}")
 
 
 @dataclass
@@ -121,11 +127,11 @@ class Primitives:
         """Begin a primitive from the odometry pose `odom`; a sentence saying what it does.
         `amount` replaces the width level's step: metres for a straight or curved step, radians
         for a turn (`drive(0.7)`, `turn(35)` of a program)."""
-        if not isinstance(name, str) or " ".join(name.lower().split()) not in PRIMITIVES:
+        if not isinstance(name, str) or driving.normalise(name) not in PRIMITIVES:
             raise NavError(f"{quote(name, 30)} is not a driving primitive; use one of {', '.join(PRIMITIVES)}.")
         if not all(math.isfinite(v) for v in odom):
             raise NavError("The odometry pose is not finite; the robot does not move.")
-        name = " ".join(name.lower().split())
+        name = driving.normalise(name)
         if name == "stop":
             return self.stop()
         direction, side, kind, fixed = PRIMITIVES[name]

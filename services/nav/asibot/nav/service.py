@@ -5,10 +5,10 @@ the estop (`keys.estop`, followed and kept served as every process that obeys it
 Out: velocity commands on `keys.base_cmd_vel` as the robot's base controller (it announces
 itself, `asibot.safety.ownership`, and every Twist carries its identity); `nav/pose` (every cycle
 the filter updated, and at `pose_hz`), `nav/map` (latched), `nav/path` (when it changes),
-`nav/status` (at `status_hz` and on every change), user Events; the RPC verbs of
-`keys.RPC_VERBS_NAV` on `keys.nav_rpc`. While mapping (`map_start`), `nav/map` carries the
-map being built every `map_period` s; `map_save` writes it under the user's maps folder and,
-with `use`, makes it the map in use.
+`nav/status` (at `status_hz` and on every change), user Events; the RPC verbs of its table
+(asibot.nav.requests) on `keys.nav_rpc`, each handler given the checked arguments. While
+mapping (`map_start`), `nav/map` carries the map being built every `map_period` s; `map_save`
+writes it under the user's maps folder and, with `use`, makes it the map in use.
 
 The work is in `Pilot` (localisation, goals, primitives, places); this class runs its
 control loop at `rate` Hz and moves messages between it and the bus. Nothing is sent to the
@@ -24,20 +24,23 @@ import math
 import threading
 import time
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Callable
 
 import numpy as np
 
 from asibot.safety import identity, ownership
-from asibot import keys
+from asibot import driving, keys, verbs
 from asibot import messages as m
 from asibot.bus import Bus
-from asibot.errors import RpcError, arguments as _only, quote
+from asibot.errors import RpcError, quote
 from asibot.safety.estop import EStopState
 from asibot.files import data_dir
-from asibot.runtime import Service
+from asibot.runtime import Service, robot_id
 from asibot.timing import Ticker
+from asibot.verbs import Verb
 
+from asibot.nav import requests
 from asibot.nav.errors import NavError
 from asibot.nav.geometry import Pose, as_pose
 from asibot.nav.grid import OccupancyGrid
@@ -49,13 +52,8 @@ from asibot.nav.planner import Path as PlannedPath
 log = logging.getLogger("asibot.nav")
 
 NAME = "nav"
-#: The requests that set the base moving (or stop nav's own motion, localize): before the
-#: first of them for each driver, nav waits (at most HOLD_GRACE s) until the driver names it
-#: as the base's holder (asibot.safety.ownership).
-MOTION_VERBS = frozenset({"goto", "recall_position", "drive", "turn", "primitive", "localize"})
-#: Those that drive the base somewhere: refused at once while another controller holds it.
-#: Not localize: it only forgets where the robot is, while a joystick may drive it around.
-DRIVING_VERBS = MOTION_VERBS - {"localize"}
+#: Before the first verb that drives the base for each driver (`needs_driver` in the table),
+#: nav waits at most this long (s) until the driver names it the base's holder.
 HOLD_GRACE = 2.0
 SHIPPED_MAPS = Path(str(resources.files("asibot.maps")))
 
@@ -88,8 +86,7 @@ class NavService(Service):
         bus.subscribe(keys.base_odom(robot), m.Odometry, self._on_odom)
         bus.subscribe(keys.scan(robot), m.LaserScan, self._on_scan, maxsize=1)
         self.estop = EStopState(bus, robot, self._on_estop)
-        for verb in keys.RPC_VERBS_NAV:
-            bus.serve(keys.nav_rpc(robot, verb), self._handler(verb))
+        self._serve()
         self.cycles = self.commands = 0
         self.slowest_cycle = 0.0
         self._last_pose = self._last_status = self._last_map = -math.inf
@@ -186,145 +183,137 @@ class NavService(Service):
             resolution=grid.info.resolution, origin=[o.x, o.y, o.theta], data=grid.data, name=name))
 
     # -------------------------------------------------------------------------- RPC
-    def _handler(self, verb: str) -> Callable[[dict], dict]:
-        rpc = getattr(self, f"_rpc_{verb}")
+    def _serve(self) -> None:
+        """Serve every verb of the table (asibot.nav.requests) with its handler below."""
+        handlers: dict[str, Callable[[float, SimpleNamespace], dict]] = {
+            "goto": self._rpc_goto, "cancel": self._rpc_cancel, "result": self._rpc_result,
+            "status": self._rpc_status, "places": self._rpc_places, "save_place": self._rpc_save_place,
+            "rename_place": self._rpc_rename_place, "remove_place": self._rpc_remove_place,
+            "save_position": self._rpc_save_position, "recall_position": self._rpc_recall_position,
+            "drive": self._rpc_drive, "turn": self._rpc_turn, "primitive": self._rpc_primitive,
+            "settings": self._rpc_settings, "set_pose": self._rpc_set_pose, "localize": self._rpc_localize,
+            "save_map": self._rpc_save_map, "map_start": self._rpc_map_start, "map_stop": self._rpc_map_stop,
+            "map_save": self._rpc_map_save,
+        }
+        verbs.serve(self.bus, lambda verb: keys.nav_rpc(self.robot, verb), requests.VERBS,
+                    {verb: self._with_pilot(handle) for verb, handle in handlers.items()}, before=self._before)
 
-        def handle(req: dict) -> dict:
-            stop = req.get("name") == "stop"      # never delayed (the bus passes maps only)
-            holder = self.holder.current
-            if verb in DRIVING_VERBS and not stop and holder not in (None, self.controller):
-                raise RpcError("busy", f"Another program drives the base of {self.robot} ({identity.short(holder)}); "
-                                       "stop it first.")
-            if verb in MOTION_VERBS and not stop:
-                self.hold.wait(time.monotonic() + HOLD_GRACE)
+    def _with_pilot(self, handle: Callable[[float, SimpleNamespace], dict]) -> verbs.Handler:
+        """`handle` holding the pilot (the loop waits meanwhile); every change is told at once."""
+        def run(args: SimpleNamespace) -> dict:
             with self._lock:
-                reply = rpc(self.clock(), req)
+                reply = handle(self.clock(), args)
             self._publish_status(force=True)
             return reply
-        return handle
+        return run
 
-    def _rpc_goto(self, now: float, req: dict) -> dict:
-        _only(req, "goto", "place", "pose")
-        return self.pilot.goto(now, req.get("place"), req.get("pose"))
+    def _before(self, verb: str, spec: Verb, args: SimpleNamespace) -> None:
+        """Before a verb that drives the base (`needs_driver`): refuse it at once while another
+        program holds the base, else wait a moment until the base driver names nav its holder.
+        A stop is neither refused nor delayed."""
+        if not spec.needs_driver or (verb == "primitive" and driving.normalise(args.name) == "stop"):
+            return
+        holder = self.holder.current
+        if holder not in (None, self.controller):
+            raise RpcError("busy", f"Another program drives the base of {self.robot} ({identity.short(holder)}); "
+                                   "stop it first.")
+        self.hold.wait(time.monotonic() + HOLD_GRACE)
 
-    def _rpc_cancel(self, now: float, req: dict) -> dict:
-        _only(req, "cancel", "goal_id")
-        return self.pilot.cancel(now, req.get("goal_id"))
+    def _rpc_goto(self, now: float, args: SimpleNamespace) -> dict:
+        return self.pilot.goto(now, args.place, args.pose)
 
-    def _rpc_result(self, now: float, req: dict) -> dict:
-        _only(req, "result", "goal_id")
-        return self.pilot.result(req.get("goal_id"))
+    def _rpc_cancel(self, now: float, args: SimpleNamespace) -> dict:
+        return self.pilot.cancel(now, args.goal_id)
 
-    def _rpc_status(self, now: float, req: dict) -> dict:
-        _only(req, "status")
+    def _rpc_result(self, now: float, args: SimpleNamespace) -> dict:
+        return self.pilot.result(args.goal_id)
+
+    def _rpc_status(self, now: float, args: SimpleNamespace) -> dict:
         msg = self.pilot.status_message()
         pose = self.pilot.pose()
         return {**{f: getattr(msg, f) for f in msg._fields if f != "stamp"}, "pose": list(pose)}
 
-    def _rpc_places(self, now: float, req: dict) -> dict:
-        _only(req, "places")
+    def _rpc_places(self, now: float, args: SimpleNamespace) -> dict:
         return {"places": [{"name": p.name, "pose": list(p.pose)} for p in self.pilot.places.list()]}
 
-    def _rpc_save_place(self, now: float, req: dict) -> dict:
+    def _rpc_save_place(self, now: float, args: SimpleNamespace) -> dict:
         """Save a place: here (no pose), or at a pose; `replace` moves an existing one."""
-        _only(req, "save_place", "name", "pose", "replace")
-        pose = as_pose(req["pose"], "pose") if req.get("pose") is not None else self._here()
-        place = self.pilot.places.add(req.get("name"), pose, replace=bool(req.get("replace", False)))
+        pose = as_pose(args.pose, "pose") if args.pose is not None else self._here()
+        place = self.pilot.places.add(args.name, pose, replace=args.replace)
         return {"name": place.name, "pose": list(place.pose)}
 
-    def _rpc_rename_place(self, now: float, req: dict) -> dict:
-        _only(req, "rename_place", "name", "new_name")
-        place = self.pilot.places.rename(req.get("name"), req.get("new_name"))
+    def _rpc_rename_place(self, now: float, args: SimpleNamespace) -> dict:
+        place = self.pilot.places.rename(args.name, args.new_name)
         return {"name": place.name, "pose": list(place.pose)}
 
-    def _rpc_remove_place(self, now: float, req: dict) -> dict:
-        _only(req, "remove_place", "name")
-        place = self.pilot.places.remove(req.get("name"))
+    def _rpc_remove_place(self, now: float, args: SimpleNamespace) -> dict:
+        place = self.pilot.places.remove(args.name)
         return {"name": place.name}
 
-    def _rpc_save_position(self, now: float, req: dict) -> dict:
-        _only(req, "save_position")
+    def _rpc_save_position(self, now: float, args: SimpleNamespace) -> dict:
         return {"pose": list(self.pilot.places.save_position(self._here()))}
 
-    def _rpc_recall_position(self, now: float, req: dict) -> dict:
-        _only(req, "recall_position")
+    def _rpc_recall_position(self, now: float, args: SimpleNamespace) -> dict:
         return self.pilot.recall_position(now)
 
-    def _rpc_drive(self, now: float, req: dict) -> dict:
+    def _rpc_drive(self, now: float, args: SimpleNamespace) -> dict:
         """Drive straight `distance` m (negative: backwards), closed-loop, stopping before obstacles."""
-        _only(req, "drive", "distance")
-        d = _number(req.get("distance"), "distance", "m")
+        d = args.distance
         if d == 0:
             raise NavError("distance must not be 0; use a positive distance forwards or a negative one backwards.")
         return self.pilot.drive(now, "forward" if d > 0 else "backward", amount=abs(d))
 
-    def _rpc_turn(self, now: float, req: dict) -> dict:
+    def _rpc_turn(self, now: float, args: SimpleNamespace) -> dict:
         """Turn in place by `angle` degrees (positive: counter-clockwise)."""
-        _only(req, "turn", "angle")
-        a = _number(req.get("angle"), "angle", "deg")
+        a = args.angle
         if a == 0:
             raise NavError("angle must not be 0; positive turns left (counter-clockwise), negative right.")
         return self.pilot.drive(now, "turn left" if a > 0 else "turn right", amount=math.radians(abs(a)))
 
-    def _rpc_primitive(self, now: float, req: dict) -> dict:
-        _only(req, "primitive", "name", "continuous")
-        return self.pilot.drive(now, req.get("name"), continuous=req.get("continuous", False))
+    def _rpc_primitive(self, now: float, args: SimpleNamespace) -> dict:
+        return self.pilot.drive(now, driving.normalise(args.name), continuous=args.continuous)
 
-    def _rpc_settings(self, now: float, req: dict) -> dict:
-        _only(req, "settings", "change")
-        return self.pilot.settings(req.get("change"))
+    def _rpc_settings(self, now: float, args: SimpleNamespace) -> dict:
+        return self.pilot.settings(args.change)
 
-    def _rpc_set_pose(self, now: float, req: dict) -> dict:
-        _only(req, "set_pose", "pose", "cov")
-        if req.get("pose") is None:
-            raise NavError("set_pose needs a pose [x, y, theta] (m and rad, map frame).")
-        return self.pilot.set_pose(now, req["pose"], req.get("cov"))
+    def _rpc_set_pose(self, now: float, args: SimpleNamespace) -> dict:
+        return self.pilot.set_pose(now, args.pose, args.cov)
 
-    def _rpc_localize(self, now: float, req: dict) -> dict:
-        _only(req, "localize")
+    def _rpc_localize(self, now: float, args: SimpleNamespace) -> dict:
         return self.pilot.localize(now)
 
-    def _rpc_save_map(self, now: float, req: dict) -> dict:
+    def _rpc_save_map(self, now: float, args: SimpleNamespace) -> dict:
         """Write the map in use as map_server YAML + PGM under the user's maps folder."""
-        _only(req, "save_map", "name")
-        yaml_path, pgm = save_map(self.pilot.grid, self._map_path(req.get("name", "map")))
+        yaml_path, pgm = save_map(self.pilot.grid, self._map_path(args.name))
         return {"yaml": str(yaml_path), "pgm": str(pgm)}
 
-    def _map_path(self, name: object) -> Path:
+    def _map_path(self, name: str) -> Path:
         """data_dir()/nav/<robot>/maps/<name>.yaml (the folder made); NavError for a path."""
-        if name is None or (isinstance(name, str) and not name.strip()):
-            raise NavError("A map needs a name, for example 'home' (it is saved as home.yaml and home.pgm).")
-        if isinstance(name, str) and ("/" in name or "\\" in name or name.strip().startswith(".")):
+        if "/" in name or "\\" in name or name.startswith("."):
             raise NavError(f"A map name is a plain name, not a path; got {quote(name, 40)}.")
         name = check_name(name)
         folder = data_dir() / "nav" / self.robot / "maps"
         folder.mkdir(parents=True, exist_ok=True)
         return folder / f"{name}.yaml"
 
-    def _rpc_map_start(self, now: float, req: dict) -> dict:
+    def _rpc_map_start(self, now: float, args: SimpleNamespace) -> dict:
         """Start building a new map from the scans while the robot is driven (goals are refused)."""
-        _only(req, "map_start")
         return self.pilot.map_start(now)
 
-    def _rpc_map_stop(self, now: float, req: dict) -> dict:
+    def _rpc_map_stop(self, now: float, args: SimpleNamespace) -> dict:
         """Stop mapping; the map is kept to be saved, and the map in use is shown again."""
-        _only(req, "map_stop")
         reply = self.pilot.map_stop(now)
         self._latch_map()
         return reply
 
-    def _rpc_map_save(self, now: float, req: dict) -> dict:
+    def _rpc_map_save(self, now: float, args: SimpleNamespace) -> dict:
         """Save the map built (while mapping or after map_stop) as <name>.yaml + .pgm; with `use`,
         localise and navigate on it from now on (mapping ends)."""
-        _only(req, "map_save", "name", "use")
-        use = req.get("use", False)
-        if not isinstance(use, bool):
-            raise NavError(f"use must be true or false; got {quote(use, 30)}.")
-        path = self._map_path(req.get("name"))
+        path = self._map_path(args.name)
         summary = self.pilot.mapper.summary() if self.pilot.mapper is not None else ""
         yaml_path, pgm = save_map(self.pilot.map_grid(), path)
         reply = {"yaml": str(yaml_path), "pgm": str(pgm), "text": f"saved the map {path.stem!r} ({summary})"}
-        if use:
+        if args.use:
             loaded = load_map(yaml_path)     # what was written, exactly as a restart would read it
             reply["text"] += "; " + self.pilot.use_map(now, loaded.grid)["text"]
             self.loaded = loaded
@@ -354,12 +343,6 @@ class NavService(Service):
             self._send(0.0, 0.0)
 
 
-def _number(value: object, name: str, unit: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise NavError(f"{name} must be a finite number in {unit}; got {quote(value, 30)}.")
-    return float(value)
-
-
 # -------------------------------------------------------------------------- command line
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--map", default=str(SHIPPED_MAPS / "apartment.yaml"),
@@ -384,9 +367,9 @@ def _start_pose(text: str, places: Places) -> Pose:
 
 
 def build(bus: Bus, args: argparse.Namespace) -> NavService:
-    if not args.robot:
-        raise ValueError("--robot is required: the robot to navigate, e.g. pioneer-sim")
-    keys.nav_status(args.robot)   # a ValueError with a sentence for a bad robot name
+    if not args.robot:   # no default: nav would wait for a robot nobody named
+        raise ValueError("--robot is required: the robot to navigate, e.g. pioneer-sim (nav has no default robot)")
+    robot = robot_id(args, default="")
     if not 5.0 <= args.rate <= 50.0:
         raise ValueError(f"--rate must be between 5 and 50 Hz; got {args.rate:g}")
     try:
@@ -394,10 +377,10 @@ def build(bus: Bus, args: argparse.Namespace) -> NavService:
     except NavError as exc:
         raise ValueError(exc.message) from None
     try:
-        places = Places.for_robot(args.robot, args.world, loaded.grid.info)
+        places = Places.for_robot(robot, args.world, loaded.grid.info)
     except NavError as exc:
         raise ValueError(exc.message) from None
     start = _start_pose(args.initial_pose, places)
     if not loaded.grid.info.contains(start.x, start.y):
         raise ValueError(f"--initial-pose ({start.x:.2f}, {start.y:.2f}) is outside the map ({loaded.grid.info.bounds()})")
-    return NavService(bus, args.robot, loaded, places, start, rate=args.rate)
+    return NavService(bus, robot, loaded, places, start, rate=args.rate)

@@ -1,19 +1,20 @@
 """The Base page's half of the API: send a mobile robot to a place or a point of its map, drive
 it with the thesis's primitives, and keep its named places. Each route is one call to the
-robot's nav service (`keys.nav_rpc`); its refusals reach the page as its sentences.
+robot's nav service through `NavClient`, the client the CLI and user programs use; its
+refusals reach the page as its sentences.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal, get_args
+from typing import Annotated, Literal
 
 from fastapi import APIRouter, Request
 from pydantic import Field, StrictBool, StrictStr
 
-from asibot import keys
+from asibot import driving
+from asibot.client import NavClient
 from asibot.errors import RpcError
-from asibot.nav.primitives import PRIMITIVES
 from asibot.web.models import Number, RobotId, Strict
 from asibot.web.routing import known, off_loop, web_of
 
@@ -21,13 +22,12 @@ router = APIRouter(prefix="/api/base")
 
 #: The primitives, and how the page lays out their buttons: as a person faces the way the robot
 #: goes (forward on top, the curves beside it, the exact turns below).
-DRIVES = tuple(PRIMITIVES)
+DRIVES = driving.PRIMITIVES
 DRIVE_ROWS = (("curve forward left", "forward", "curve forward right"),
               ("turn left", "stop", "turn right"),
               ("curve backward left", "backward", "curve backward right"),
               ("turn left 90", "turn around", "turn right 90"))
-ChangeName = Literal["faster", "slower", "wider", "narrower"]
-CHANGES: tuple[str, ...] = get_args(ChangeName)
+CHANGES = driving.CHANGES
 #: Nav answers at once (a goal runs on after the answer); a slow answer is a stuck service.
 NAV_TIMEOUT = 5.0
 
@@ -50,7 +50,7 @@ class Drive(Strict):
 
 
 class Change(Strict):
-    change: ChangeName
+    change: Literal[CHANGES]   # type: ignore[valid-type]  # the changes' names, known at import only
 
 
 class NewPlace(Strict):
@@ -68,11 +68,10 @@ def config() -> dict:
     return {"drives": [list(row) for row in DRIVE_ROWS], "changes": list(CHANGES)}
 
 
-def _nav(request: Request, robot: str, verb: str, **body: object) -> dict:
+def _nav(request: Request, robot: str) -> NavClient:
+    """The nav service of `robot`, over the web's bus."""
     web = web_of(request)
-    known(web, robot)
-    return web.motion.bus.call(keys.nav_rpc(robot, verb), {k: v for k, v in body.items() if v is not None},
-                               timeout=NAV_TIMEOUT)
+    return NavClient.on(web.motion.bus, known(web, robot), timeout=NAV_TIMEOUT)
 
 
 @router.get("/{robot}/map", summary="the robot's navigation map (occupancy grid)")
@@ -87,12 +86,15 @@ def nav_map(robot: RobotId, request: Request) -> dict:
 @router.post("/{robot}/goto", summary="go to a named place or to a point of the map")
 async def goto(robot: RobotId, body: Goal, request: Request) -> dict:
     x, y = body.x, body.y
+    target: str | list[float]
     if body.place is not None and (x is None or y is None):
-        return await off_loop(_nav, request, robot, "goto", place=body.place)
-    if body.place is not None or x is None or y is None:
+        target = body.place
+    elif body.place is not None or x is None or y is None:
         raise RpcError("bad_request", "Say where to go: a place, or a point x and y (m) of the map, not both.")
-    theta = math.radians(body.theta_deg) if body.theta_deg is not None else _facing(request, robot, x, y)
-    return await off_loop(_nav, request, robot, "goto", pose=[float(x), float(y), theta])
+    else:
+        theta = math.radians(body.theta_deg) if body.theta_deg is not None else _facing(request, robot, x, y)
+        target = [float(x), float(y), theta]
+    return dict(await off_loop(_nav(request, robot).goto_reply, target))
 
 
 def _facing(request: Request, robot: str, x: float, y: float) -> float:
@@ -106,34 +108,35 @@ def _facing(request: Request, robot: str, x: float, y: float) -> float:
 
 @router.post("/{robot}/cancel", summary="cancel the running goal")
 async def cancel(robot: RobotId, request: Request) -> dict:
-    return await off_loop(_nav, request, robot, "cancel")
+    return dict(await off_loop(_nav(request, robot).cancel))
 
 
 @router.post("/{robot}/drive", summary="one of the driving primitives, or stop")
 async def drive(robot: RobotId, body: Drive, request: Request) -> dict:
-    return await off_loop(_nav, request, robot, "primitive", name=body.name, continuous=body.continuous or None)
+    return {"text": await off_loop(_nav(request, robot).primitive, body.name, body.continuous)}
 
 
 @router.post("/{robot}/settings", summary="faster, slower, wider or narrower")
 async def settings(robot: RobotId, body: Change, request: Request) -> dict:
-    return await off_loop(_nav, request, robot, "settings", change=body.change)
+    return dict(await off_loop(_nav(request, robot).settings, body.change))
 
 
 @router.get("/{robot}/places", summary="the robot's named places")
 async def places(robot: RobotId, request: Request) -> dict:
-    return await off_loop(_nav, request, robot, "places")
+    places = await off_loop(_nav(request, robot).places)
+    return {"places": [{"name": name, "pose": pose} for name, pose in places.items()]}
 
 
 @router.post("/{robot}/places", summary="save a place where the robot stands")
 async def save_place(robot: RobotId, body: NewPlace, request: Request) -> dict:
-    return await off_loop(_nav, request, robot, "save_place", name=body.name, replace=body.replace or None)
+    return dict(await off_loop(_nav(request, robot).save_place_reply, body.name, None, body.replace))
 
 
 @router.post("/{robot}/places/{name}/rename", summary="rename a place")
 async def rename_place(robot: RobotId, name: str, body: Rename, request: Request) -> dict:
-    return await off_loop(_nav, request, robot, "rename_place", name=name, new_name=body.new_name)
+    return dict(await off_loop(_nav(request, robot).rename_place, name, body.new_name))
 
 
 @router.delete("/{robot}/places/{name}", summary="remove a place")
 async def remove_place(robot: RobotId, name: str, request: Request) -> dict:
-    return await off_loop(_nav, request, robot, "remove_place", name=name)
+    return {"name": await off_loop(_nav(request, robot).remove_place, name)}
