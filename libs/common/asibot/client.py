@@ -1,4 +1,5 @@
-"""The user's Python API (README, "Programming the arm"): a thin, blocking wrapper over the kinematics and nav RPC.
+"""The user's Python API (README, "Programming the arm"): thin, blocking wrappers over the
+kinematics, nav and tasks RPC.
 
 Points are the seed's [x, y, z, rot(y'), rot(z'')] in m and deg, joints in deg. Every call
 has a timeout; a refusal raises asibot.errors.RpcError (code + the server's sentence).
@@ -194,6 +195,47 @@ class CartesianClient(_Client):
     def grip(self, close: bool = True) -> bool:
         """Close (or open) the gripper; True when it holds something afterwards."""
         return self.act("close" if close else "open")["holding"]
+
+    def jog(self, axis: str, step: float, level: int) -> dict:
+        """One step of one axis, as the page's step buttons move it: a joint ("q1", "q2", ...)
+        by `step` deg (a movj), or a coordinate of the point ("x", "y", "z" by m, "rot(y')",
+        "rot(z'')" by deg; a movl), at speed level `level` (1 slowest to 5). A step asked while
+        the previous one still moves goes on from that step's target, so steps add up as on a
+        pendant. The reply: {"duration": s} and the step's target, "joints" (deg) or "point"."""
+        return self._call("jog", axis=axis, step=step, level=level)
+
+
+class TasksClient(_Client):
+    """The Task Creator's tasks, served by the web service (which runs one program at a time):
+    `tasks = TasksClient("asibot-sim"); tasks.launch("Give me the red can")`.
+
+    A task runs on this client's robot; `stop` and `status` are about the running program,
+    whichever robot it drives."""
+
+    _probe, _service = "status", "web"
+
+    def _key(self, verb: str) -> str:
+        return keys.tasks_rpc(verb)
+
+    def tasks(self) -> list[dict]:
+        """Every task: {"name", "program", "words"}, `words` being what a user says to launch it."""
+        return self._call("list")["tasks"]
+
+    def launch(self, task: str) -> dict:
+        """Start the task named `task` on this client's robot, as the Launcher's button does:
+        {"task", "program", "robot"}. Raises RpcError "bad_request" for a task that does not
+        exist, "busy" while a program runs, "unavailable" when the robot is not connected."""
+        reply = self._call("launch", task=task, robot=self._opened())
+        return {"task": reply["task"], "program": reply["program"], "robot": reply["robot"]}
+
+    def stop(self) -> None:
+        """Stop the running program, if any."""
+        self._call("stop")
+
+    def status(self) -> dict:
+        """The program runner's state: {"program", "robot", "pid", "running", "started", "last"},
+        `last` saying how the previous run ended."""
+        return self._call("status")
 
 
 class NavClient(_Client):

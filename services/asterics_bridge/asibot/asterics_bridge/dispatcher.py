@@ -3,9 +3,11 @@
 The dispatcher knows the bus, not sockets. A `Session` is one client's state: the robot it
 drives (`robot <id>`, default `--robot`), what `wider`/`narrower` change (the base after a base
 word, the arm step after an arm word), the arm step level, its place in the scanning menu,
-whether it gave the token. Base words go to the nav service of the robot (`keys.nav_rpc`), arm
-words to its kinematics service (`keys.cart_rpc`), `run` to the Task Creator
-(`keys.tasks_rpc`). A refusal comes back as the service's sentence.
+whether it gave the token. Every word of the vocabulary has its handler in one table, checked
+against the vocabulary when the dispatcher is built (`vocab.check_handlers`). Base words go to
+the nav service of the robot (`NavClient`), arm words to its kinematics service
+(`CartesianClient`), `run` to the Task Creator (`TasksClient`): the clients user programs use,
+over the bridge's bus. A refusal comes back as the service's sentence.
 
 Safety:
 - a command that does not parse moves nothing (it never reaches an RPC);
@@ -22,11 +24,13 @@ import itertools
 import logging
 import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Callable, Iterator
 
 from asibot import keys
 from asibot.bus import Bus
+from asibot.client import CartesianClient, NavClient, TasksClient
 from asibot.errors import CODES, RpcError, Unavailable
 
 from asibot.asterics_bridge import vocabulary as vocab
@@ -43,8 +47,6 @@ DEFAULT_LONGEST = 60.0
 DEFAULT_MENU = ("stop", "forward", "turn left", "turn right", "backward", "turn around")
 #: NetConnection event port -> command, by default (`--events`).
 DEFAULT_EVENTS = {1: "next", 2: "select", 3: "stop"}
-
-_SERVICES = {"nav": "nav", "cart": "kinematics", "tasks": "web (Task Creator)"}
 
 
 @dataclass(frozen=True)
@@ -81,6 +83,10 @@ class Session:
         return f"Session({self.id}, {self.peer}, robot={self.robot})"
 
 
+#: What runs a word: (the client's session, the word's argument or "") -> the reply's text.
+Handler = Callable[[Session, str], str]
+
+
 @dataclass
 class _Motion:
     """The latest base motion a client started on a robot."""
@@ -105,6 +111,24 @@ class Dispatcher:
         self.counters = {"commands": 0, "ok": 0, "refused": 0, "not_understood": 0, "stops_on_disconnect": 0,
                          "stops_on_longest": 0}
         self.board = StatusBoard(bus, self._on_notice)
+        self._words = self._handlers()
+        vocab.check_handlers(self._words)
+
+    def _handlers(self) -> dict[str, Handler]:
+        """Every word of the vocabulary and its handler."""
+        return {
+            **{word: self._drive(word) for word in vocab.PRIMITIVES},
+            **{word: self._step(word) for word in vocab.ARM_STEPS},
+            "stop": self._do_stop, "faster": self._do_faster, "slower": self._do_slower,
+            "wider": self._do_wider, "narrower": self._do_narrower, "goto": self._do_goto,
+            "save position": self._do_save_position, "recall position": self._do_recall_position,
+            "places": self._do_places,
+            "grab": self._do_grab, "release": self._do_release, "arm save": self._do_arm_save,
+            "arm recall": self._do_arm_recall, "arm home": self._do_arm_home, "arm stop": self._do_arm_stop,
+            "run": self._do_run, "tasks": self._do_tasks,
+            "robot": self._do_robot, "token": self._do_token, "next": self._do_next, "previous": self._do_previous,
+            "select": self._do_select, "status": self._do_status, "help": self._do_help,
+        }
 
     # ------------------------------------------------------------------ sessions
     def open_session(self, peer: str) -> Session:
@@ -150,12 +174,7 @@ class Dispatcher:
             return Reply(False, "This bridge serves the network and needs its access token first: "
                                 "send 'token <secret>' (asterics_bridge printed it at start).", "forbidden")
         try:
-            if cmd.word in vocab.PRIMITIVES:
-                text = self._primitive(session, cmd.word)
-            elif cmd.word in vocab.ARM_STEPS:
-                text = self._arm_step(session, cmd.word)
-            else:
-                text = getattr(self, "_do_" + cmd.word.replace(" ", "_"))(session, cmd.arg)
+            text = self._words[cmd.word](session, cmd.arg)
         except RpcError as exc:
             self.counters["refused"] += 1
             return Reply(False, exc.message, exc.code)
@@ -166,32 +185,46 @@ class Dispatcher:
         self.counters["ok"] += 1
         return Reply(True, text)
 
-    # ------------------------------------------------------------------ calls
-    def _call(self, service: str, key: str, request: dict | None = None, timeout: float | None = None) -> dict:
-        try:
-            return self.bus.call(key, request or {}, timeout=timeout or self.timeout)
-        except Unavailable:
-            robot = keys.robot_of(key) or ""
-            where = f" for robot '{robot}'" if robot else ""
-            raise Unavailable(f"No {_SERVICES[service]} service answers{where}; start it (asibot up), "
-                              "or choose another robot with 'robot <id>'.") from None
+    # ------------------------------------------------------------------ services
+    @contextmanager
+    def _nav(self, robot: str) -> Iterator[NavClient]:
+        with _answering("nav", robot):
+            yield NavClient.on(self.bus, robot, timeout=self.timeout)
 
-    def _nav(self, robot: str, verb: str, **request: Any) -> dict:
-        return self._call("nav", keys.nav_rpc(robot, verb), request)
+    @contextmanager
+    def _arm(self, robot: str, timeout: float | None = None) -> Iterator[CartesianClient]:
+        with _answering("kinematics", robot):
+            yield CartesianClient.on(self.bus, robot, timeout=timeout or self.timeout)
 
-    def _cart(self, robot: str, verb: str, timeout: float | None = None, **request: Any) -> dict:
-        return self._call("cart", keys.cart_rpc(robot, verb), request, timeout)
+    @contextmanager
+    def _tasks(self, robot: str) -> Iterator[TasksClient]:
+        # One Task Creator serves every robot: its absence is not the robot's.
+        with _answering("web (Task Creator)", None):
+            yield TasksClient.on(self.bus, robot, timeout=self.timeout)
 
-    def _tasks(self, verb: str, **request: Any) -> dict:
-        return self._call("tasks", keys.tasks_rpc(verb), request)
+    def _stop_base(self, robot: str) -> None:
+        with self._nav(robot) as nav:
+            nav.stop()
+
+    def _stop_arm(self, robot: str) -> None:
+        with self._arm(robot) as arm:
+            arm.stop()
+
+    def _stop_task(self, robot: str) -> None:
+        with self._tasks(robot) as tasks:
+            tasks.stop()
 
     # ------------------------------------------------------------------ base
-    def _primitive(self, s: Session, word: str) -> str:
+    def _drive(self, word: str) -> Handler:
+        """The handler of a base word that is one of nav's driving primitives."""
         name, continuous = vocab.PRIMITIVES[word]
-        request = {"name": name, "continuous": True} if continuous else {"name": name}
-        text = self._nav(s.robot, "primitive", **request)["text"]
-        self._started(s, word, continuous)
-        return text
+
+        def drive(s: Session, arg: str) -> str:
+            with self._nav(s.robot) as nav:
+                text = nav.primitive(name, continuous)
+            self._started(s, word, continuous)
+            return text
+        return drive
 
     def _started(self, s: Session, word: str, continuous: bool) -> None:
         s.target = vocab.BASE
@@ -204,10 +237,9 @@ class Dispatcher:
         with self._lock:
             self._motions.pop(s.robot, None)
         task = self.board.robot(s.robot).task
-        calls = [("base", lambda: self._nav(s.robot, "primitive", name="stop")),
-                 ("arm", lambda: self._cart(s.robot, "stop"))]
+        calls = [("base", lambda: self._stop_base(s.robot)), ("arm", lambda: self._stop_arm(s.robot))]
         if task:
-            calls.append((f"task {task}", lambda: self._tasks("stop")))
+            calls.append((f"task {task}", lambda: self._stop_task(s.robot)))
         for what, call in calls:
             try:
                 call()
@@ -226,7 +258,9 @@ class Dispatcher:
         return "stopped " + " and ".join(done)
 
     def _settings(self, s: Session, change: str) -> str:
-        return self._nav(s.robot, "settings", change=change)["text"]
+        with self._nav(s.robot) as nav:
+            # NavClient has no `settings` method yet: its verb by name until it has.
+            return nav._call("settings", change=change)["text"]
 
     def _do_faster(self, s: Session, arg: str) -> str:
         s.target = vocab.BASE
@@ -250,47 +284,68 @@ class Dispatcher:
             return f"arm step {ARM_STEPS_MM[s.arm_level - 1]} mm{edge}"
         return self._settings(s, "wider" if delta > 0 else "narrower")
 
+    def _place_names(self, robot: str) -> list[str]:
+        with self._nav(robot) as nav:
+            return list(nav.places())
+
     def _do_goto(self, s: Session, place: str) -> str:
-        names = [p["name"] for p in self._nav(s.robot, "places")["places"]]
+        names = self._place_names(s.robot)
         found = vocab.find(place, names)
         if found is None:
             known = ", ".join(names) if names else "none yet"
             raise RpcError("bad_request", f"unknown place '{place[:40]}'{vocab.suggest(place, names)} "
                                           f"(places: {known})")
-        reply = self._nav(s.robot, "goto", place=found)
+        with self._nav(s.robot) as nav:
+            # NavClient.goto answers the goal's id alone; the user hears nav's sentence.
+            reply = nav._call("goto", place=found)
         self._started(s, f"goto {found}", False)
         return reply.get("text") or f"going to {found}"
 
     def _do_save_position(self, s: Session, arg: str) -> str:
-        self._nav(s.robot, "save_position")
+        with self._nav(s.robot) as nav:
+            # NavClient has no `save_position` method yet: its verb by name until it has.
+            nav._call("save_position")
         s.target = vocab.BASE
         return "position saved"
 
     def _do_recall_position(self, s: Session, arg: str) -> str:
-        reply = self._nav(s.robot, "recall_position")
+        with self._nav(s.robot) as nav:
+            # NavClient has no `recall_position` method yet: its verb by name until it has.
+            reply = nav._call("recall_position")
         self._started(s, "recall position", False)
         return reply.get("text") or "going back to the saved position"
 
     def _do_places(self, s: Session, arg: str) -> str:
-        names = [p["name"] for p in self._nav(s.robot, "places")["places"]]
+        names = self._place_names(s.robot)
         return "places: " + (", ".join(names) if names else "none yet")
 
     # ------------------------------------------------------------------ arm
     def _point(self, s: Session) -> list[float]:
-        return [float(v) for v in self._cart(s.robot, "stat")["point"]]
+        with self._arm(s.robot) as arm:
+            return [float(v) for v in arm.stat()]
 
-    def _arm_step(self, s: Session, word: str) -> str:
-        s.target = vocab.ARM
-        mm = ARM_STEPS_MM[s.arm_level - 1]
-        point = self._point(s)
-        for i, d in enumerate(vocab.ARM_STEPS[word]):
-            point[i] += d * mm / 1000.0
-        self._cart(s.robot, "movl", point=point)
-        return f"{word} {mm} mm"
+    def _movl(self, s: Session, point: list[float]) -> None:
+        with self._arm(s.robot) as arm:
+            arm.movl(point)
+
+    def _step(self, word: str) -> Handler:
+        """The handler of an arm step word: a straight line of the session's step."""
+        direction = vocab.ARM_STEPS[word]
+
+        def step(s: Session, arg: str) -> str:
+            s.target = vocab.ARM
+            mm = ARM_STEPS_MM[s.arm_level - 1]
+            point = self._point(s)
+            for i, d in enumerate(direction):
+                point[i] += d * mm / 1000.0
+            self._movl(s, point)
+            return f"{word} {mm} mm"
+        return step
 
     def _grip(self, s: Session, action: str) -> dict:
         s.target = vocab.ARM
-        return self._cart(s.robot, "act", timeout=GRIP_TIMEOUT, action=action)
+        with self._arm(s.robot, GRIP_TIMEOUT) as arm:
+            return arm.act(action)
 
     def _do_grab(self, s: Session, arg: str) -> str:
         reply = self._grip(s, "close")
@@ -313,41 +368,43 @@ class Dispatcher:
             point = self._arm_saved.get(s.robot)
         if point is None:
             raise RpcError("bad_request", f"No arm position is saved for {s.robot} yet; say 'arm save' first.")
-        self._cart(s.robot, "movl", point=point)
+        self._movl(s, point)
         return "arm going back to the saved position"
 
     def _do_arm_home(self, s: Session, arg: str) -> str:
         s.target = vocab.ARM
-        self._cart(s.robot, "home")
+        with self._arm(s.robot) as arm:
+            arm.home()
         return "arm going home"
 
     def _do_arm_stop(self, s: Session, arg: str) -> str:
-        self._cart(s.robot, "stop")
+        self._stop_arm(s.robot)
         return "arm stopped"
 
     # ------------------------------------------------------------------ tasks
-    def _task_names(self) -> list[str]:
-        return [t["name"] for t in self._tasks("list")["tasks"]]
+    def _task_names(self, robot: str) -> list[str]:
+        with self._tasks(robot) as tasks:
+            return [t["name"] for t in tasks.tasks()]
 
     def _do_run(self, s: Session, task: str) -> str:
         try:
-            reply = self._tasks("launch", task=task, robot=s.robot)
+            with self._tasks(s.robot) as tasks:
+                name = tasks.launch(task)["task"]
         except RpcError as exc:
             if exc.code == "bad_request":
                 try:
-                    names = self._task_names()
+                    names = self._task_names(s.robot)
                 except RpcError:
                     names = []
                 if names and vocab.find(task, names) is None:
                     raise RpcError("bad_request", f"unknown task '{task[:40]}'{vocab.suggest(task, names)} "
                                                   f"(tasks: {', '.join(names)})") from None
             raise
-        name = reply.get("task", task)
         self.board.robot(s.robot).task = name
         return f"running {name}"
 
     def _do_tasks(self, s: Session, arg: str) -> str:
-        names = self._task_names()
+        names = self._task_names(s.robot)
         return "tasks: " + (", ".join(names) if names else "none yet")
 
     # ------------------------------------------------------------------ the bridge
@@ -424,7 +481,7 @@ class Dispatcher:
     def _send_stop(self, robot: str, motion: _Motion, counter: str) -> bool:
         self.counters[counter] += 1
         try:
-            self._nav(robot, "primitive", name="stop")
+            self._stop_base(robot)
             log.info("stopped %s (%s of %r)", robot, counter.replace("_", " "), motion.session)
             return True
         except RpcError as exc:
@@ -454,6 +511,18 @@ class Dispatcher:
 
     def health(self) -> dict:
         return {**self.counters, "clients": self.sessions(), "moving": sorted(self._motions)}
+
+
+@contextmanager
+def _answering(service: str, robot: str | None) -> Iterator[None]:
+    """Calls to `service` (of `robot`): when nobody answers, the user hears which service it is
+    and what to do, not the bus's key."""
+    try:
+        yield
+    except Unavailable:
+        where = f" for robot '{robot}'" if robot else ""
+        raise Unavailable(f"No {service} service answers{where}; start it (asibot up), "
+                          "or choose another robot with 'robot <id>'.") from None
 
 
 def parse_events(text: str) -> dict[int, str]:

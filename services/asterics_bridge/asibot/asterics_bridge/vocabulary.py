@@ -4,13 +4,15 @@
 raises `NotUnderstood` with a sentence that proposes the nearest word ("unknown command
 'forwrd'; did you mean 'forward'?"). Words are case-insensitive and spaces are folded; the
 arguments of `goto`, `run`, `robot` and `token` keep their case. `WORDS` is the table that
-docs/asterics.md prints: word, what it drives, what it does.
+docs/asterics.md prints: word, what it drives, what it does; the dispatcher's table of handlers
+must match it word for word (`check_handlers`).
 """
 
 from __future__ import annotations
 
 import difflib
 from dataclasses import dataclass
+from typing import Collection
 
 MAX_COMMAND_CHARS = 200
 
@@ -160,6 +162,16 @@ def suggest(name: str, names: list[str]) -> str:
 def find(name: str, names: list[str]) -> str | None:
     """`name` as spelled in `names`, ignoring case; None when absent."""
     return next((n for n in names if n.lower() == name.lower()), None)
+
+
+def check_handlers(handlers: Collection[str]) -> None:
+    """ValueError unless every word of WORDS has a handler and every handler a word: the
+    dispatcher checks its table with it when it is built, so a word added here without a
+    handler (or a handler left after its word went) stops the bridge at start, not a user."""
+    words = {w.word for w in WORDS}
+    missing, extra = sorted(words - set(handlers)), sorted(set(handlers) - words)
+    if missing or extra:
+        raise ValueError(f"words without a handler: {missing or 'none'}; handlers without a word: {extra or 'none'}")
 
 
 def help_text() -> str:

@@ -244,7 +244,7 @@ async def _on_page_message(web: Web, page, text: str) -> None:
             if isinstance(msg, page_messages.Hold):
                 await asyncio.to_thread(web.motion.hold, msg.robot, msg.space, msg.axis, msg.direction, msg.level)
             else:
-                await asyncio.to_thread(web.motion.point, msg.robot, msg.reading_message(), _tool_pitch(web, msg.robot))
+                await asyncio.to_thread(web.motion.point, msg.robot, msg.reading, _tool_pitch(web, msg.robot))
         except RpcError as exc:
             page.offer(page_messages.Refused(exc.message, exc.code).json())
     elif isinstance(msg, page_messages.Release):

@@ -4,15 +4,14 @@
 (asibot.web.pointer), `release` when either ends; `mic` starts or stops the page's microphone.
 `read` turns one text message into one of these, or refuses it with the sentence the page shows.
 The robot is checked first, as the REST routes do, so a page commanding a robot that went away
-hears that before anything about its fields. Motion (motion.py) still checks the same values
-again: that goes once it takes these typed values as they are.
+hears that before anything about its fields. Motion (motion.py) takes these typed values as
+they are: this is the one check of what a page sends.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import json
-from typing import Annotated, Any, Callable, Collection, Literal
+from typing import Annotated, Any, Callable, Collection, Literal, TypeGuard
 
 from pydantic import (BaseModel, ConfigDict, Field, InstanceOf, TypeAdapter, ValidationError, ValidationInfo,
                       field_validator, model_validator)
@@ -20,8 +19,8 @@ from pydantic_core import PydanticCustomError
 
 from asibot import robots
 from asibot.errors import CODES, RpcError
+from asibot.jog import SPEED_LEVELS
 from asibot.poses import POINT_AXES
-from asibot.web.motion import check_direction, speed_fraction, whole
 from asibot.web.pointer import DeviceReading
 from asibot.web.voice_relay import MicError, check_rate
 
@@ -29,7 +28,7 @@ from asibot.web.voice_relay import MicError, check_rate
 PAGE_MESSAGE_LIMIT = 16 * 1024
 NOT_UNDERSTOOD = "The page sent a message the server does not understand."
 #: A reading with the dead-man off: the pointer stream ends at once (Motion.point).
-STILL: dict[str, Any] = {"source": "phone", "pitch": 0.0, "roll": 0.0, "deadman": False}
+STILL = DeviceReading("phone", 0.0, 0.0, deadman=False)
 #: The error type of a refusal the page gets without a code (the microphone's, as before).
 _NO_CODE = "refused"
 
@@ -54,8 +53,27 @@ def _refuse(code: str, sentence: str) -> PydanticCustomError:
     return PydanticCustomError(code, "{sentence}", {"sentence": sentence})
 
 
+def whole(value: object) -> TypeGuard[int]:
+    """An int that is not a bool (JSON's `true` is not the number 1 here)."""
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def check_level(level: int) -> int:
+    """A speed level, 1 (slowest) to 5, else a bad_request with the sentence the page shows."""
+    if not whole(level) or not 1 <= level <= len(SPEED_LEVELS):
+        raise RpcError("bad_request", f"The speed level must be 1 to {len(SPEED_LEVELS)}; got {level!r}.")
+    return level
+
+
+def check_direction(direction: int) -> int:
+    """-1 or 1, else a bad_request with the sentence the page shows."""
+    if not whole(direction) or direction not in (-1, 1):
+        raise RpcError("bad_request", f"The direction must be -1 or 1; got {direction!r}.")
+    return direction
+
+
 def _checked(check: Callable[[Any], object], value: object) -> object:
-    """`value`, once Motion's own check (and its sentence) accepts it."""
+    """`value`, once `check` (and its sentence) accepts it."""
     try:
         check(value)
     except RpcError as exc:
@@ -131,7 +149,7 @@ class Hold(_ToRobot):
     @field_validator("level", mode="before")
     @classmethod
     def _level(cls, level: object) -> object:
-        return _checked(speed_fraction, level)
+        return _checked(check_level, level)
 
 
 class Point(_ToRobot):
@@ -152,9 +170,6 @@ class Point(_ToRobot):
             return DeviceReading.from_message(message)   # type: ignore[arg-type]  # _gather: a dict
         except RpcError as exc:
             raise _refuse(exc.code, exc.message) from None
-
-    def reading_message(self) -> dict[str, Any]:
-        return dataclasses.asdict(self.reading)
 
 
 class Release(_Message):
