@@ -8,8 +8,10 @@ from asibot.bus import Bus
 from asibot.safety.driver_contract import DriverContract, command
 from asibot.safety.arming import NotReady
 from asibot.safety.events import CommandRefused
+from asibot.errors import RpcError
 from asibot.messages import ArmCommand, EStop, Event, Twist
 from asibot.testing import Inbox, release, wait_until
+from asibot.verbs import Field, OneOf, Verb
 
 R = "contract-robot"
 
@@ -40,7 +42,8 @@ def driver(memory_bus):
             on_holder=lambda part, holder: rec.holders((part, holder)),
             on_estop=lambda engaged, reason, by: rec.estops((engaged, reason, by)),
             status=lambda: {"mode": "idle"}, reset_fault=lambda: {"reset": True},
-            verbs={"inject_fault": lambda req: {"injected": req.get("fault")}})
+            verbs={"inject_fault": Verb({"fault": Field(OneOf(("silent", "clear")), required=True)})},
+            handlers={"inject_fault": lambda args: {"injected": args.fault}})
         events = Inbox()
         user.subscribe(keys.events(R), Event, events)
         arm = ownership.announce(user, R, "arm", "kinematics")
@@ -102,6 +105,10 @@ def test_status_verbs_estop_and_liveliness(driver):
     assert status == {"ok": True, "robot": R, "mode": "idle", "holders": {"arm": arm.id, "base": base.id}}
     assert user.call(keys.driver_rpc(R, "reset_fault")) == {"ok": True, "reset": True}
     assert user.call(keys.driver_rpc(R, "inject_fault"), {"fault": "silent"}) == {"ok": True, "injected": "silent"}
+    with pytest.raises(RpcError, match="'fault' must be silent or clear; got 'meteor'"):
+        user.call(keys.driver_rpc(R, "inject_fault"), {"fault": "meteor"})
+    with pytest.raises(RpcError, match="status takes no arguments"):
+        user.call(keys.driver_rpc(R, "status"), {"verbose": True})
     user.latch(keys.estop(R), EStop(engaged=True, reason="test", by="ana"))
     wait_until(lambda: len(rec.estops) == 1, 5)
     assert rec.estops.last() == (True, "test", "ana, unsigned")

@@ -181,7 +181,7 @@ def test_find_the_red_can_over_the_bus(h):
     with pytest.raises(RpcError, match="Unknown colour 'purple': ask for one of red") as exc:
         h.bus.call(key, {"color": "purple"})
     assert exc.value.code == "bad_request"
-    with pytest.raises(RpcError, match='find takes only "color"'):
+    with pytest.raises(RpcError, match="find takes only color; 'colour' is not one of them"):
         h.bus.call(key, {"colour": "red"})
 
 

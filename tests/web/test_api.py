@@ -270,7 +270,7 @@ def test_other_services_launch_a_task_on_the_bus_and_hear_how_it_ended(web, api)
         assert {"name": "Hello", "program": "say_hello", "words": []} in listed
         for bad, code, words in (({"task": "Nope", "robot": ROBOT}, "bad_request", "no task named"),
                                  ({"task": "Hello", "robot": "ghost"}, "unavailable", "not connected"),
-                                 ({"task": 5, "robot": ROBOT}, "bad_request", "name as text"),
+                                 ({"task": 5, "robot": ROBOT}, "bad_request", "'task' must be a task name"),
                                  ({"task": "Hello", "robot": ROBOT, "now": True}, "bad_request", "takes only")):
             with pytest.raises(RpcError, match=words) as err:
                 other.call(keys.tasks_rpc("launch"), bad, timeout=5)

@@ -1,5 +1,6 @@
-"""The user's Python API (README, "Programming the arm"): thin, blocking wrappers over the
-kinematics, nav and tasks RPC.
+"""The user's Python API (README, "Programming the arm"): thin, blocking clients of the
+kinematics, nav, tasks, driver and sim RPC verbs, shared by programs, the command line, the web
+and the AsTeRICS bridge (`Client.on(bus, robot)` over a service's own bus).
 
 Points are the seed's [x, y, z, rot(y'), rot(z'')] in m and deg, joints in deg. Every call
 has a timeout; a refusal raises asibot.errors.RpcError (code + the server's sentence).
@@ -382,6 +383,63 @@ class NavClient(_Client):
         """Save the map built as <name>.yaml + <name>.pgm (ROS map_server) in the user's maps
         folder; `use` makes it the map in use at once. {"yaml", "pgm", "text"}."""
         return self._call("map_save", name=name, use=use or None)
+
+
+class DriverClient(_Client):
+    """The driver contract's verbs of one robot, whoever drives it (the CANopen arm driver, the
+    ARCOS base driver or the sim): `status`, and what every client has, `reset_fault` and the
+    emergency stop. `DriverClient("asibot").status()["estop"]`."""
+
+    _probe = "status"
+
+    def _key(self, verb: str) -> str:
+        return keys.driver_rpc(self._opened(), verb)
+
+    def open(self, robot: str) -> bool:
+        """Connect to the driver of `robot`; raises Unavailable if none answers. (A driver is one
+        of several services, so the sentence names them all, not one `python -m`.)"""
+        if self._bus is None:
+            self._bus = Bus("client", wait=self.timeout)
+        self.robot = robot.strip("/")
+        if not self._bus.wait_for(self._key(self._probe), timeout=self.timeout):
+            raise RpcError("unavailable", f"No driver answers for robot {self.robot!r}; start its driver "
+                                          "(arm_driver, base_driver) or the sim, e.g. with `asibot up`.")
+        return True
+
+    def status(self) -> dict:
+        """What the driver says of itself ("mode", "fault", "estop", ...), its "robot" and who
+        holds each part ("holders")."""
+        return self._call("status")
+
+
+class SimClient(_Client):
+    """The simulation's own verbs, for tests and demos: put its world back as it started, move
+    an object or the mobile base, ask where an object is.
+    `sim = SimClient("asibot-sim"); sim.object_pose("red_can")`. Positions are in m, in the
+    world frame; the base's pose in the map frame."""
+
+    _probe, _service = "reset_world", "sim"
+
+    def _key(self, verb: str) -> str:
+        return keys.driver_rpc(self._opened(), verb)
+
+    def reset_world(self) -> None:
+        """Objects and arm where they started, the base too, odometry at zero."""
+        self._call("reset_world")
+
+    def object_pose(self, name: str) -> list[float]:
+        """Where object `name` is: [x, y, z]."""
+        return self._call("object_pose", name=name)["pos"]
+
+    def set_object_pose(self, name: str, pos: Sequence[float], quat: Sequence[float] | None = None) -> None:
+        """Teleport object `name` to `pos` [x, y, z], turned by `quat` [w, x, y, z] (default
+        upright); it leaves the gripper first."""
+        self._call("set_object_pose", name=name, pos=pos, quat=quat)
+
+    def set_robot_pose(self, pose: Sequence[float]) -> None:
+        """Teleport the mobile base to `pose` [x, y, theta] (m, m, rad, map frame): its odometry
+        does not see it, as the wheels of a robot carried elsewhere turn not."""
+        self._call("set_robot_pose", pose=pose)
 
 
 def default_robot() -> str:

@@ -17,11 +17,14 @@ from asibot import access, keys
 from asibot.safety import estop
 from asibot.cli import nav as navcli
 from asibot.bus import DEFAULT_ROUTER, ROUTER_ENV, Bus, open_router, router_endpoint
+from asibot.client import DriverClient, SimClient
 from asibot.errors import AsibotError
 from asibot.messages import Health
 from asibot.safety.estop import who
 from asibot.safety.identity import Identity
 
+#: How long a driver may take to clear a fault or to reset its world, s (drives re-initialise).
+RESET_TIMEOUT = 10.0
 
 
 def _stop_on_signals() -> threading.Event:
@@ -156,10 +159,10 @@ def _who() -> str:
         return socket.gethostname()
 
 
-def _driver_estop(bus: Bus, robot: str) -> bool | None:
+def _driver_estop(driver: DriverClient) -> bool | None:
     """What the robot's driver says of its estop; None when it cannot say."""
     try:
-        return bool(bus.call(keys.driver_rpc(robot, "status"), timeout=1.0).get("estop"))
+        return bool(driver.status().get("estop"))
     except AsibotError:
         return None
 
@@ -187,7 +190,7 @@ def cmd_estop(args: argparse.Namespace) -> int:
             estop.latch(bus, robot, me, True, reason, by)
         code = 0
         for robot in robots:
-            engaged = _wait_for(functools.partial(_driver_estop, bus, robot), 2.0)
+            engaged = _wait_for(functools.partial(_driver_estop, DriverClient.on(bus, robot, timeout=1.0)), 2.0)
             if engaged:
                 print(f"{robot}: stopped; the emergency stop holds until `asibot release {robot}`")
             else:
@@ -205,7 +208,8 @@ def cmd_release(args: argparse.Namespace) -> int:
         if _refused(bus, [args.robot]):
             return 1
         estop.latch(bus, args.robot, Identity("asibot-release"), False, "asibot release", by)
-        if _wait_for(lambda: _driver_estop(bus, args.robot) is False, 2.0):
+        driver = DriverClient.on(bus, args.robot, timeout=1.0)
+        if _wait_for(lambda: _driver_estop(driver) is False, 2.0):
             print(f"{args.robot}: emergency stop released by {by}; it moves again only on a new motion request")
             return 0
     print(f"{args.robot}: the release was sent, but no driver of {args.robot} confirmed it "
@@ -213,12 +217,20 @@ def cmd_release(args: argparse.Namespace) -> int:
     return 1
 
 
-def cmd_driver_verb(args: argparse.Namespace) -> int:
-    """`reset-fault` and `reset-world`: one driver RPC, its sentence on refusal."""
+def cmd_reset_fault(args: argparse.Namespace) -> int:
+    """Ask the robot's driver to clear its fault; its sentence on refusal."""
     with Bus(args.command, wait=args.wait) as bus:
-        reply = bus.call(keys.driver_rpc(args.robot, args.verb), timeout=10.0)
+        reply = DriverClient.on(bus, args.robot, timeout=RESET_TIMEOUT).reset_fault()
     reply.pop("ok", None)
-    print(f"{args.robot}: {args.done}" + (f" {reply}" if reply else ""))
+    print(f"{args.robot}: fault cleared" + (f" {reply}" if reply else ""))
+    return 0
+
+
+def cmd_reset_world(args: argparse.Namespace) -> int:
+    """Put a simulated robot's world back as it started."""
+    with Bus(args.command, wait=args.wait) as bus:
+        SimClient.on(bus, args.robot, timeout=RESET_TIMEOUT).reset_world()
+    print(f"{args.robot}: world reset: objects and arm where they started, odometry at zero")
     return 0
 
 
@@ -422,14 +434,13 @@ def build_parser() -> argparse.ArgumentParser:
     rl.add_argument("robot")
     rl.add_argument("--wait", type=float, default=2.0, help="seconds to wait for the router")
     rl.set_defaults(func=cmd_release)
-    for name, verb, done, text in (
-            ("reset-fault", "reset_fault", "fault cleared", "ask a robot's driver to clear its fault"),
-            ("reset-world", "reset_world", "world reset: objects and arm where they started, odometry at zero",
-             "simulated robots only: put the world back as it started (the red can too)")):
+    for name, func, text in (
+            ("reset-fault", cmd_reset_fault, "ask a robot's driver to clear its fault"),
+            ("reset-world", cmd_reset_world, "simulated robots only: put the world back as it started (the red can too)")):
         rf = sub.add_parser(name, help=text)
         rf.add_argument("robot")
         rf.add_argument("--wait", type=float, default=2.0, help="seconds to wait for the router")
-        rf.set_defaults(func=cmd_driver_verb, verb=verb, done=done)
+        rf.set_defaults(func=func)
 
     navcli.add_parser(sub)
 

@@ -13,7 +13,8 @@ small contract, a backend behind it):
 - the estop is followed and kept served after its sender exits (`asibot.safety.estop`); a release
   that is not signed is refused with an Event;
 - `status` says who holds each part beside what the driver says of itself; `reset_fault` and
-  the driver's own verbs are served; `driver_alive` is announced last, once all of it answers.
+  the driver's own verbs (a table of `asibot.verbs`, beside `VERBS`) are served, each request
+  checked by its table; `driver_alive` is announced last, once all of it answers.
 
 A driver service makes its `DriverContract` first (its Events go out from then on), then the
 driver, then `serve`s what the driver obeys, as `command(name, obey, heard)`s.
@@ -32,6 +33,7 @@ from asibot.safety.estop import EStopState
 from asibot.safety.events import CommandRefused, EventThrottle, refusal_reason
 from asibot.messages import ArmCommand, EStop, Event, GripperCommand, Twist
 from asibot.safety.ownership import Holder, NotHolder, holders_status
+from asibot.verbs import Handler, Verb, serve as serve_verbs
 
 log = logging.getLogger(__name__)
 
@@ -45,6 +47,13 @@ class Kind:
     part: str
     refused: str
 
+
+#: The verbs every driver serves on `keys.driver_rpc`; a driver may add its own beside them.
+VERBS = {
+    "status": Verb(doc="what the driver says of itself (mode, fault, estop...), its robot and who holds each part"),
+    "reset_fault": Verb(doc="clear a fault (re-initialise what failed); refused with the driver's sentence "
+                            "while it is still there"),
+}
 
 KINDS = {
     "arm": Kind(keys.arm_command, ArmCommand, "arm", "Arm command refused, the arm keeps its previous motion"),
@@ -99,11 +108,15 @@ class DriverContract:
               on_holder: Callable[[str, str | None], None],
               on_estop: Callable[[bool, str, str], None],
               status: Callable[[], dict], reset_fault: Callable[[], dict],
-              verbs: Mapping[str, Callable[[dict], dict]] | None = None) -> None:
+              verbs: Mapping[str, Verb] | None = None, handlers: Mapping[str, Handler] | None = None) -> None:
         """Obey `commands` from their holders; `on_holder(part, id)` hears each change of a
         part's holder, `on_estop(engaged, reason, by)` each newer estop state; `status()` is the
         driver's own status, `reset_fault()` clears a fault (raising RpcError with the sentence
-        when it cannot)."""
+        when it cannot). `verbs` are the driver's own verbs (the sim's `reset_world`, the
+        emulated bus's `inject_fault`), answered by `handlers` with the checked arguments."""
+        verbs, handlers = verbs or {}, handlers or {}
+        if set(verbs) & set(VERBS):    # a driver cannot answer for the contract
+            raise ValueError(f"a driver's own verbs cannot be {', '.join(sorted(set(verbs) & set(VERBS)))}")
         bus, robot = self.bus, self.robot
         self.commands = list(commands)
         self._status = status
@@ -117,10 +130,8 @@ class DriverContract:
         for c in self.commands:
             bus.subscribe(c.kind.key(robot), c.kind.message, self._receiver(c), with_key=True,
                           on_reject=lambda key, exc, c=c: self.refuse(c.name, exc))
-        bus.serve(keys.driver_rpc(robot, "status"), lambda req: self.status())
-        bus.serve(keys.driver_rpc(robot, "reset_fault"), lambda req: reset_fault())
-        for verb, handler in (verbs or {}).items():
-            bus.serve(keys.driver_rpc(robot, verb), handler)
+        serve_verbs(bus, lambda verb: keys.driver_rpc(robot, verb), {**VERBS, **verbs},
+                    {"status": lambda args: self.status(), "reset_fault": lambda args: reset_fault(), **handlers})
         bus.announce(keys.driver_alive(robot))
 
     def _receiver(self, c: Command) -> Callable[[str, Any], None]:

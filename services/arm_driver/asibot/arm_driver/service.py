@@ -2,7 +2,7 @@
 
 Publishes arm_state; the rest of the driver contract (arm_command from the holder only, the
 estop, events, `status`, `reset_fault`, driver_alive) is `asibot.safety.driver_contract`'s, with
-`inject_fault` on the emulated bus.
+`inject_fault` on the emulated bus (its table: `verbs`).
 """
 
 from __future__ import annotations
@@ -10,8 +10,9 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+from typing import Any, Sequence
 
-from asibot import keys
+from asibot import keys, runtime
 from asibot.arm_driver import canbus, config
 from asibot.arm_driver import emulator as emulation
 from asibot.arm_driver.driver import ArmDriver, FaultError
@@ -21,6 +22,7 @@ from asibot.safety.driver_contract import DriverContract, command
 from asibot.errors import RpcError
 from asibot.messages import ArmCommand, ArmState
 from asibot.runtime import Service
+from asibot.verbs import Field, Number, OneOf, Verb
 
 log = logging.getLogger(__name__)
 
@@ -29,6 +31,18 @@ DEFAULT_ROBOT = "asibot"
 CAN_ENV = "ASIBOT_ARM_CAN"
 FAULTS = ("over_current", "heartbeat_loss", "silent", "bus_off", "reboot", "power_cycle",
           "encoder_silent", "encoder_error", "clear")
+#: Longest bus_off an injection may ask for, s.
+MAX_BUS_OFF = 60.0
+
+
+def verbs(joints: Sequence[str]) -> dict[str, Verb]:
+    """The driver's own verb on the emulated bus, for an arm whose joints are named `joints`."""
+    return {"inject_fault": Verb({
+        "fault": Field(OneOf(FAULTS), required=True),
+        "joint": Field(OneOf(tuple(joints)), also="for a fault of one drive or encoder"),
+        "seconds": Field(Number(0.0, MAX_BUS_OFF, "s", open_low=True), default=0.5, also="how long bus_off lasts"),
+    }, doc="emulated CAN bus only: make a drive or an absolute encoder fail as real ones do (clear undoes "
+           "all but latched faults)")}
 
 
 class ArmDriverService(Service):
@@ -54,12 +68,13 @@ class ArmDriverService(Service):
         self.contract = DriverContract(bus, robot)
         self.driver = ArmDriver(CanopenMaster(can_bus, self.config), self.config,
                                 on_state=self._state.put, on_event=self.contract.event)
-        verbs = (
-            {"inject_fault": self._inject_fault} if self.emulator is not None else {})
+        emulated = self.emulator is not None
         self.contract.serve(
             [command("arm", self._obey, self.driver.heard)],
             on_holder=lambda part, holder: self.driver.set_controller(holder), on_estop=self.driver.set_estop,
-            status=self.driver.status, reset_fault=self._reset_fault, verbs=verbs)
+            status=self.driver.status, reset_fault=self._reset_fault,
+            verbs=verbs(self.config.names) if emulated else {},
+            handlers={"inject_fault": self._inject_fault} if emulated else {})
         self.holder = self.contract.holders["arm"]
         self.driver.start()
 
@@ -77,36 +92,29 @@ class ArmDriverService(Service):
         except FaultError as exc:
             raise RpcError("fault", str(exc)) from None
 
-    def _inject_fault(self, request: dict) -> dict:
-        """Emulated bus only: {"fault": one of FAULTS, "joint": "q3", "seconds": 0.5 (bus_off)}.
-        encoder_* faults concern the joint's absolute encoder; clear undoes all but latched ones."""
-        fault = request.get("fault")
-        if fault not in FAULTS:
-            raise RpcError("bad_request", f"fault must be one of {', '.join(FAULTS)}")
+    def _inject_fault(self, a: Any) -> dict:
+        """Emulated bus only: `fault` (one of FAULTS) of `joint`'s drive, or of its absolute
+        encoder for encoder_*; bus_off for `seconds`; clear undoes all but latched ones."""
         emu = self.emulator
         if emu is None:     # the verb is served only on the emulated bus
             raise RpcError("unavailable", "Faults can be injected only on the emulated CAN bus (--can emulated).")
-        if fault == "clear":
+        if a.fault == "clear":
             emu.clear()
             return {}
-        if fault == "bus_off":
-            seconds = request.get("seconds", 0.5)
-            if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not 0 < seconds <= 60:
-                raise RpcError("bad_request", "seconds must be a number between 0 and 60")
-            emu.bus_off(float(seconds))
+        if a.fault == "bus_off":
+            emu.bus_off(a.seconds)
             return {}
-        joint = request.get("joint")
-        if joint not in self.config.names:
-            raise RpcError("bad_request", f"joint must be one of {', '.join(self.config.names)}")
-        j = self.config.joints[self.config.names.index(joint)]
-        if fault.startswith("encoder_"):
+        if a.joint is None:
+            raise RpcError("bad_request", f"inject_fault {a.fault} needs 'joint': one of {', '.join(self.config.names)}.")
+        j = self.config.joints[self.config.names.index(a.joint)]
+        if a.fault.startswith("encoder_"):
             if j.absolute is None:
                 with_encoder = ", ".join(x.name for x in self.config.joints if x.absolute)
-                raise RpcError("bad_request", f"joint {joint} has no absolute encoder; these do: {with_encoder}")
-            emu.encoder_fault(j.absolute.can_id, fault.removeprefix("encoder_"))
+                raise RpcError("bad_request", f"joint {a.joint} has no absolute encoder; these do: {with_encoder}")
+            emu.encoder_fault(j.absolute.can_id, a.fault.removeprefix("encoder_"))
             return {}
         {"over_current": emu.over_current, "heartbeat_loss": emu.heartbeat_loss,
-         "silent": emu.silent, "reboot": emu.reboot, "power_cycle": emu.power_cycle}[fault](j.node)
+         "silent": emu.silent, "reboot": emu.reboot, "power_cycle": emu.power_cycle}[a.fault](j.node)
         return {}
 
     # ------------------------------------------------------------ runtime hooks
@@ -132,8 +140,7 @@ def build(bus: Bus, args: argparse.Namespace) -> ArmDriverService:
     if not can_name:
         raise ValueError(f"no CAN bus: pass --can socketcan:can0 (or pcan:PCAN_USBBUS1, or emulated), "
                          f"or set {CAN_ENV}")
-    if not args.robot:
-        args.robot = DEFAULT_ROBOT
-        if args.instance == "main":      # the runtime announces svc/arm_driver/<instance> after build
-            args.instance = DEFAULT_ROBOT
-    return ArmDriverService(bus, args.robot, can_name, args.config)
+    robot = runtime.robot_id(args, DEFAULT_ROBOT)
+    if not args.robot and args.instance == "main":   # the runtime announces svc/arm_driver/<instance> after build
+        args.instance = robot
+    return ArmDriverService(bus, robot, can_name, args.config)

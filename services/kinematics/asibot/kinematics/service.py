@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
-from asibot import robots
+from asibot import robots, runtime
 from asibot.bus import Bus
 from asibot.kinematics.model import solver_for
 from asibot.kinematics.server import KinematicsServer
@@ -21,14 +21,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def build(bus: Bus, args: argparse.Namespace) -> KinematicsServer:
-    if not args.robot:
+    if not args.robot:     # no default: which arm to control is the user's choice
         raise ValueError("--robot is required: asibot-sim, asibot, pioneer-sim or pioneer")
+    robot = runtime.robot_id(args, args.robot)
     try:
-        spec = robots.get(args.robot)
+        spec = robots.get(robot)
     except KeyError as exc:
         raise ValueError(exc.args[0]) from None
     if args.solver:
         if args.solver == "asibot" and spec.arm != "asibot":
-            raise ValueError(f"--solver asibot is the ASIBOT's closed form; {args.robot} has a {spec.arm} arm")
+            raise ValueError(f"--solver asibot is the ASIBOT's closed form; {robot} has a {spec.arm} arm")
         spec = dataclasses.replace(spec, solver=args.solver)
-    return KinematicsServer(bus, args.robot, solver_for(spec), spec, rate=args.rate)
+    return KinematicsServer(bus, robot, solver_for(spec), spec, rate=args.rate)

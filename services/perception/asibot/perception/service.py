@@ -26,15 +26,16 @@ import math
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
-from asibot import keys
+from asibot import keys, runtime, verbs
 from asibot import messages as m
 from asibot.bus import Bus
 from asibot.errors import RpcError
 from asibot.runtime import Service
+from asibot.verbs import Field, Text, Verb
 
 from asibot.perception import finder
 from asibot.perception.assembler import ScanAssembler
@@ -56,6 +57,13 @@ RGB_STALE_S = 2.0
 """`find` refuses an RGB image older than this: the robot may have moved since."""
 DEPTH_SYNC_S = 0.5
 """`find` uses the depth frames that arrived within this of the RGB image."""
+
+#: The verbs of `keys.perception_rpc`. A colour is any text here: which colours the finder
+#: knows (in any capitals) is its own check, whose sentence lists them.
+VERBS = {
+    "find": Verb({"color": Field(Text("a colour name", longest=40), default="red")},
+                 doc="where the largest object of a colour in the RGB camera's view is, in the robot's base frame"),
+}
 
 
 @dataclass
@@ -113,7 +121,7 @@ class PerceptionService(Service):
         if options.sonar is not None:
             bus.subscribe(keys.base_sonar(robot), m.Sonar, self._on_sonar)
         bus.subscribe(keys.base_odom(robot), m.Odometry, self._on_odom)
-        bus.serve(keys.perception_rpc(robot, "find"), self._rpc_find)
+        verbs.serve(bus, lambda verb: keys.perception_rpc(robot, verb), VERBS, {"find": self._find})
         self._watcher = threading.Thread(target=self._watch, name="perception-watch", daemon=True)
         self._watcher.start()
 
@@ -207,13 +215,9 @@ class PerceptionService(Service):
             self._silent = silent
 
     # ------------------------------------------------------------------ RPC
-    def _rpc_find(self, req: dict) -> dict:
-        unknown = set(req) - {"color"}
-        if unknown:
-            raise RpcError("bad_request", f"find takes only \"color\" (e.g. {{\"color\": \"red\"}}), "
-                                          f"not {', '.join(sorted(map(str, unknown)))}.")
+    def _find(self, a: Any) -> dict:
         try:
-            color = finder.check_color(req.get("color", "red"))
+            color = finder.check_color(a.color)
         except BadInput as exc:
             raise RpcError("bad_request", _sentence(exc)) from None
         name = self.opt.rgb_camera
@@ -284,17 +288,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def build(bus: Bus, args: argparse.Namespace) -> PerceptionService:
-    if not args.robot:
+    if not args.robot:     # no default: which robot's cameras to read is the user's choice
         raise ValueError("--robot is required: the robot whose cameras to read, e.g. pioneer-sim")
+    robot = runtime.robot_id(args, args.robot)
     rgb = args.rgb_camera or None
     for name in (*args.depth_cameras, *([rgb] if rgb else [])):
-        keys.camera_depth(args.robot, name)     # a ValueError with a sentence for a bad name
+        keys.camera_depth(robot, name)          # a ValueError with a sentence for a bad name
     band = BandConfig(min_height=args.min_height, max_height=args.max_height,
                       range_min=args.range_min, range_max=args.range_max)
     band.check()
     if not args.freshness > 0:
         raise ValueError("--freshness must be a positive number of seconds")
     grid = ScanGrid(beams=args.beams, range_max=args.range_max)
-    return PerceptionService(bus, args.robot, Options(
+    return PerceptionService(bus, robot, Options(
         depth_cameras=args.depth_cameras, rgb_camera=rgb, band=band, grid=grid, freshness=args.freshness,
         sonar=None if args.no_sonar else SonarRing.p3at()))

@@ -6,17 +6,19 @@ configuration, so a slow frame never delays the 100 Hz arm state. All logic live
 `Simulation`; this class only moves messages between it and the bus, and keeps the two
 bus-facing safety rules of a driver: only the controller that holds a part moves it
 (asibot.safety.ownership: the arm and gripper, the base), and the estop state is kept served after
-its sender exits (asibot.safety.estop).
+its sender exits (asibot.safety.estop). Beside the driver contract's verbs it serves its own
+(`VERBS`: tests and demos put its world back or move what is in it).
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import math
 import threading
 import time
 from dataclasses import dataclass
-from typing import TypedDict
+from typing import Any, TypedDict
 
 import mujoco
 
@@ -32,6 +34,7 @@ from asibot.sim.cameras import Camera
 from asibot.sim.scene import WORLDS
 from asibot.sim.simulation import Simulation, world_for
 from asibot.timing import Ticker
+from asibot.verbs import Field, Number, Numbers, Text, Verb
 
 log = logging.getLogger("asibot.sim")
 
@@ -43,6 +46,30 @@ CATCH_UP_S = 0.05
 """Most simulated time run in one batch to catch up with the wall clock."""
 CAMERA_KINDS = {"front": ("depth",), "back": ("depth",), "rgb": ("rgb",), "kitchen": ("depth", "rgb")}
 """What each camera of the worlds produces (camera names are those of worlds/*.xml)."""
+
+MAX_WORLD = 100.0
+"""Largest world coordinate a request may ask for, m: far beyond every world of worlds/."""
+_WORLD = Number(-MAX_WORLD, MAX_WORLD, "m")
+_OBJECT = Field(Text("an object name", longest=100), required=True)
+
+#: The sim's own verbs on `keys.driver_rpc`, beside the driver contract's. Which objects there
+#: are is the world's: an unknown name is refused by the handler, with the world's objects.
+VERBS = {
+    "reset_world": Verb(doc="put the world back as it started: objects and arm where they started, "
+                            "odometry at zero"),
+    "set_object_pose": Verb({
+        "name": _OBJECT,
+        "pos": Field(Numbers(("x", "y", "z"), (_WORLD,) * 3), required=True),
+        "quat": Field(Numbers(("w", "x", "y", "z"), (Number(-1.0, 1.0),) * 4),
+                      also="or null for upright; normalised here"),
+    }, doc="teleport a free object (world frame), out of the gripper"),
+    "object_pose": Verb({"name": _OBJECT}, doc="where an object is: pos, [x, y, z] in m, world frame"),
+    "set_robot_pose": Verb({"pose": Field(Numbers(("x", "y", "theta"), (_WORLD, _WORLD,
+                                                                        Number(-math.tau, math.tau, "rad"))),
+                                          required=True)},
+                           doc="teleport the mobile base (map frame); its odometry does not see it, as a robot "
+                               "carried elsewhere"),
+}
 
 
 @dataclass
@@ -91,9 +118,9 @@ class SimService(Service):
                                     lambda c: self.sim.heard("base", c)))
         self.contract.serve(
             commands, on_holder=self.sim.set_controller, on_estop=self.sim.set_estop,
-            status=self.sim.status, reset_fault=self._reset_fault,
-            verbs={"reset_world": self._rpc_reset_world, "set_object_pose": self._rpc_set_object_pose,
-                   "object_pose": self._rpc_object_pose, "set_robot_pose": self._rpc_set_robot_pose})
+            status=self.sim.status, reset_fault=self._reset_fault, verbs=VERBS,
+            handlers={"reset_world": self._reset_world, "set_object_pose": self._set_object_pose,
+                      "object_pose": self._object_pose, "set_robot_pose": self._set_robot_pose})
         self.holders = self.contract.holders
         self._threads = [threading.Thread(target=self._physics_loop, name="sim-physics", daemon=True)]
         if options.camera_hz > 0:
@@ -106,33 +133,28 @@ class SimService(Service):
         self.sim.reset_fault()
         return {}
 
-    def _rpc_reset_world(self, req: dict) -> dict:
+    def _reset_world(self, a: Any) -> dict:
         self.sim.reset_world()
         return {}
 
-    def _rpc_set_object_pose(self, req: dict) -> dict:
+    def _set_object_pose(self, a: Any) -> dict:
         try:
-            self.sim.set_object_pose(str(req.get("name", "")), list(req.get("pos", [])), req.get("quat"))
-        except (KeyError, ValueError, TypeError) as exc:
+            self.sim.set_object_pose(a.name, a.pos.tolist(), None if a.quat is None else a.quat.tolist())
+        except (KeyError, ValueError) as exc:       # no such object; a quaternion of zeros
             raise RpcError("bad_request", str(exc).strip("'\"")) from None
         return {}
 
-    def _rpc_set_robot_pose(self, req: dict) -> dict:
-        pose = req.get("pose")
-        if not isinstance(pose, list) or len(pose) != 3 or not all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) for v in pose):
-            raise RpcError("bad_request", "set_robot_pose takes pose: [x, y, theta] (m, m, rad, map frame).")
+    def _set_robot_pose(self, a: Any) -> dict:
         try:
-            self.sim.set_robot_pose(*map(float, pose))
-        except ValueError as exc:
+            self.sim.set_robot_pose(*a.pose.tolist())
+        except ValueError as exc:                   # a robot without a base
             raise RpcError("bad_request", str(exc)) from None
         return {}
 
-    def _rpc_object_pose(self, req: dict) -> dict:
-        name = str(req.get("name", ""))
-        if name not in self.sim.scene.objects:
-            raise RpcError("bad_request", f"no object {name!r}; objects are {', '.join(self.sim.scene.objects)}")
-        return {"pos": self.sim.object_position(name).tolist()}
+    def _object_pose(self, a: Any) -> dict:
+        if a.name not in self.sim.scene.objects:
+            raise RpcError("bad_request", f"no object {a.name!r}; objects are {', '.join(self.sim.scene.objects)}")
+        return {"pos": self.sim.object_position(a.name).tolist()}
 
     # ------------------------------------------------------------------ loops
     def _physics_loop(self) -> None:

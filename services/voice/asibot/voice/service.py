@@ -28,19 +28,20 @@ import queue
 import threading
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from asibot.safety import estop
-from asibot import keys, messages, runtime
+from asibot import keys, messages, runtime, verbs
 from asibot.files import data_dir, write_atomic
 from asibot.bus import Bus
-from asibot.errors import RpcError, Unavailable, arguments, quote
+from asibot.errors import RpcError, Unavailable
 from asibot.safety.estop import who
 from asibot.safety.identity import Identity
 from asibot.messages import AudioChunk, Event, VoiceHeard
-from asibot.voice.audio import AudioFormat, decode, to_16k
+from asibot.verbs import Blob, Field, Flag, Number, OneOf, Text, Texts, Verb, Whole
+from asibot.voice.audio import MAX_RATE, MIN_RATE, SAMPLE_TYPES, AudioFormat, decode, to_16k
 from asibot.voice.commands import STOP, Commands, Outcome, Stopped, Transcript
 from asibot.voice.errors import GrammarError
 from asibot.voice.grammar import FIXED_WORDS, MAX_PHRASES, Grammar
@@ -63,6 +64,34 @@ MAX_WAITING = 16
 MAX_RECORDING = 10.0
 #: How long `learn` listens to a live source for the word by default, and at most, s.
 LISTEN_SECONDS, MAX_LISTEN_SECONDS = 8.0, 20.0
+#: Longest word or phrase a request may name, characters (a phrase has at most 12 words).
+MAX_WORD_CHARS = 200
+
+_WORD = Field(Text("a word or phrase", longest=MAX_WORD_CHARS), required=True)
+
+#: The verbs of `keys.voice_rpc`. Whether a word can be learned (its words, how many) and
+#: whether audio can be heard (whole frames, its length) are the learner's and the decoder's
+#: checks, whose sentences say what to do.
+VERBS = {
+    "status": Verb(doc="the words listened for, the sources heard, the settings and the words learned"),
+    "settings": Verb({"confirm": Field(Flag(), also="or absent to just read it")},
+                     doc="ask yes first before a task heard starts (kept in the user's data folder)"),
+    "learn": Verb({
+        "word": _WORD,
+        # At most MAX_RECORDING s at the highest rate, in stereo float32.
+        "data": Field(Blob("a recording", largest=int(MAX_RECORDING * MAX_RATE * 2 * 4)),
+                      also="or absent to listen to a source"),
+        "rate": Field(Whole(MIN_RATE, MAX_RATE), also="in Hz"),
+        "sample": Field(OneOf(tuple(SAMPLE_TYPES)), default="int16"),
+        "channels": Field(Whole(1, 2), default=1),
+        "source": Field(Text("an audio source name"), also="or absent to learn from a recording"),
+        "seconds": Field(Number(1.0, MAX_LISTEN_SECONDS, "s"), default=LISTEN_SECONDS),
+    }, doc="learn how the user says a word, from a recording or from the next thing said on a live source"),
+    "forget": Verb({"word": _WORD}, doc="forget the user's own pronunciations of a word (the dictionary's stay)"),
+    "learned": Verb({"words": Field(Texts(Text("a word as written", longest=MAX_WORD_CHARS), most=MAX_PHRASES),
+                                    default=())},
+                    doc="every phrase learned and its sayings, and the phrase each of `words` is learned under"),
+}
 
 log = logging.getLogger("asibot.voice")
 
@@ -141,11 +170,9 @@ class VoiceService(runtime.Service):
         self.streams = Streams(self.recognizer, self._on_result, self._on_notice, forget_after=source_timeout)
         bus.subscribe(keys.ALL_VOICE_AUDIO, AudioChunk, self._on_chunk, with_key=True, on_reject=self._on_bad_chunk)
         bus.subscribe(keys.events(robot), Event, self.commands.on_event)
-        bus.serve(keys.voice_rpc("status"), self._status)
-        bus.serve(keys.voice_rpc("settings"), self._settings)
-        bus.serve(keys.voice_rpc("learn"), self._learn)
-        bus.serve(keys.voice_rpc("forget"), self._forget)
-        bus.serve(keys.voice_rpc("learned"), self._learned)
+        verbs.serve(bus, keys.voice_rpc, VERBS, {"status": self._status, "settings": self._settings,
+                                                 "learn": self._learn, "forget": self._forget,
+                                                 "learned": self._learned})
         self._threads = [threading.Thread(target=fn, name=name, daemon=True)
                          for fn, name in ((self._act, "voice-commands"), (self._housekeeping, "voice-tasks"))]
         for t in self._threads:
@@ -243,50 +270,40 @@ class VoiceService(runtime.Service):
         """The tasks' words listened for, as written."""
         return [w for w in self.grammar.phrases.values() if w not in FIXED_WORDS]
 
-    # --- runtime.Service --------------------------------------------------------------------
-    def _status(self, req: dict) -> dict:
-        arguments(req, "status")
+    # --- the verbs of VERBS: each takes its checked arguments -------------------------------
+    def _status(self, a: Any) -> dict:
         return {"robot": self.robot, "words": self.words(), "fixed": list(FIXED_WORDS),
                 "refused": dict(self.grammar.refused), "tasks": self.tasks_problem or "ok",
                 "sources": self.streams.sources(), "confirm": self.commands.confirm, "pending": self.commands.pending,
                 "live_robots": self.robots.live(), "learned": sorted(self.pronunciations.all()),
                 "learning_from": self.streams.capturing()}
 
-    def _settings(self, req: dict) -> dict:
-        """{"confirm": true|false}: ask "Shall I start ...? Say yes or no." before a task heard
-        starts (the page's setting, kept in the user's data folder); no field: just read it."""
-        arguments(req, "settings", "confirm")
-        confirm = req.get("confirm")
-        if confirm is not None:
-            if not isinstance(confirm, bool):
-                raise RpcError("bad_request", f"confirm must be true or false; got {quote(confirm, 40)}. Nothing was changed.")
+    def _settings(self, a: Any) -> dict:
+        """`confirm`: ask "Shall I start ...? Say yes or no." before a task heard starts (the
+        page's setting, kept in the user's data folder); absent: just read it."""
+        if a.confirm is not None:
             self.settings_file.parent.mkdir(parents=True, exist_ok=True)
-            write_atomic(self.settings_file, json.dumps({"confirm": confirm}).encode())
-            self.commands.confirm = confirm
+            write_atomic(self.settings_file, json.dumps({"confirm": a.confirm}).encode())
+            self.commands.confirm = a.confirm
         return {"confirm": self.commands.confirm}
 
-    def _learn(self, req: dict) -> dict:
-        """{"word", "data", "rate", "sample", "channels"}: learn how the user says `word` from a
-        recording (the AudioChunk fields; up to MAX_RECORDING s, quiet around the word), or
-        {"word", "source", "seconds"}: from the next thing said on that live source (a page's
-        microphone), within `seconds`. Answers the phones learned and whether the recogniser
-        would already have heard the word in this saying (`matched`)."""
-        arguments(req, "learn", "word", "data", "rate", "sample", "channels", "source", "seconds")
+    def _learn(self, a: Any) -> dict:
+        """Learn how the user says `word` from a recording (`data`, `rate`, `sample`, `channels`:
+        the AudioChunk fields; up to MAX_RECORDING s, quiet around the word), or from the next
+        thing said on the live `source` (a page's microphone) within `seconds`. Answers the
+        phones learned and whether the recogniser would already have heard the word in this
+        saying (`matched`)."""
         try:
-            self.learner.phrase(req.get("word"))            # a bad word is refused before any listening
-            if ("data" in req) == ("source" in req):
+            self.learner.phrase(a.word)                 # a bad word is refused before any listening
+            if (a.data is None) == (a.source is None):
                 raise RpcError("bad_request", "learn needs either a recording (data, rate, sample, channels) or "
                                               "a live source to listen to (source), not both and not neither.")
-            if "data" in req:
-                sample = req.get("sample", "int16")
-                if not isinstance(sample, str):
-                    raise RpcError("bad_request", f"sample must be 'int16' or 'float32'; got {quote(sample, 40)}. "
-                                                  "Nothing was learned.")
-                fmt = AudioFormat.parse(req.get("rate"), sample, req.get("channels", 1))
-                decode(req["data"], fmt, max_seconds=MAX_RECORDING)       # every check, before the work
-                learned = self.learner.learn_recording(req["word"], to_16k(req["data"], fmt))
+            if a.data is not None:
+                fmt = AudioFormat.parse(a.rate, a.sample, a.channels)    # the rate a recording needs
+                decode(a.data, fmt, max_seconds=MAX_RECORDING)          # every check, before the work
+                learned = self.learner.learn_recording(a.word, to_16k(a.data, fmt))
             else:
-                learned = self.learner.learn(req["word"], self._next_utterance(req["source"], req.get("seconds")))
+                learned = self.learner.learn(a.word, self._next_utterance(a.source, a.seconds))
         except ValueError as exc:                            # BadAudio, GrammarError, a bad source name
             raise RpcError("bad_request", f"{exc} Nothing was learned.") from None
         self._relisten()
@@ -294,17 +311,9 @@ class VoiceService(runtime.Service):
                  {True: "it matched", False: f"heard {learned.heard!r}", None: "new"}[learned.matched])
         return _learned_reply(learned)
 
-    def _next_utterance(self, source: object, seconds: object) -> np.ndarray:
+    def _next_utterance(self, source: str, seconds: float) -> np.ndarray:
         """The next utterance said on live `source`, which then launches nothing; RpcError timeout."""
-        if not isinstance(source, str):
-            raise RpcError("bad_request", f"source must be the name of an audio source; got {quote(source, 40)}. "
-                                          "Nothing was learned.")
         keys.voice_audio(source)                                   # ValueError naming a bad source
-        if seconds is None:
-            seconds = LISTEN_SECONDS
-        if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not 1 <= seconds <= MAX_LISTEN_SECONDS:
-            raise RpcError("bad_request", f"seconds must be a number from 1 to {MAX_LISTEN_SECONDS:g}; got "
-                                          f"{quote(seconds, 40)}. Nothing was learned.")
         got: queue.Queue = queue.Queue()
         hand_over = got.put                  # one bound method: uncapture compares by identity
         self.streams.capture(source, hand_over)
@@ -320,11 +329,10 @@ class VoiceService(runtime.Service):
                                           "pause; say only the word or phrase. Nothing was learned.")
         return utterance.samples
 
-    def _forget(self, req: dict) -> dict:
-        """{"word"}: forget the user's own pronunciations of `word` (the dictionary's stays)."""
-        arguments(req, "forget", "word")
+    def _forget(self, a: Any) -> dict:
+        """Forget the user's own pronunciations of `word` (the dictionary's stays)."""
         try:
-            phrase, count = self.learner.forget(req.get("word"))
+            phrase, count = self.learner.forget(a.word)
         except ValueError as exc:
             raise RpcError("bad_request", f"{exc} Nothing was forgotten.") from None
         if count:
@@ -332,24 +340,20 @@ class VoiceService(runtime.Service):
             log.info("voice: forgot the %d learned pronunciation(s) of %r", count, phrase)
         return {"phrase": phrase, "forgotten": count}
 
-    def _learned(self, req: dict) -> dict:
+    def _learned(self, a: Any) -> dict:
         """Every learned phrase and its pronunciations (phones joined by spaces); with `words`
         (the user's words as written), also the phrase each is learned under (`phrases`), so a
         page can show "Give me the red can!" with the sayings of "give me the red can"."""
-        arguments(req, "learned", "words")
-        words = req.get("words", [])
-        if not isinstance(words, list) or len(words) > MAX_PHRASES:
-            raise RpcError("bad_request", f"words must be a list of at most {MAX_PHRASES} words as written; got "
-                                          f"{quote(words, 40)}.")
         phrases = {}
-        for word in words:
+        for word in a.words:
             try:
                 phrases[word] = self.learner.phrase(word)
             except ValueError:
-                continue                 # not a phrase at all (empty, too long): nothing can be learned for it
+                continue                 # not a phrase at all (no words, too many): nothing can be learned for it
         learned = self.pronunciations.all().items()
         return {"words": {phrase: [" ".join(s) for s in sayings] for phrase, sayings in learned}, "phrases": phrases}
 
+    # --- runtime.Service --------------------------------------------------------------------
     def health(self) -> dict:
         return {"robot": self.robot, "words": len(self.words()), "refused": len(self.grammar.refused),
                 "tasks": self.tasks_problem or "ok", "sources": len(self.streams.sources()),

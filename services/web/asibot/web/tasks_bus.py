@@ -11,16 +11,28 @@ clients and the spoken feedback alike.
 from __future__ import annotations
 
 import logging
-from typing import Callable
+from typing import Any, Callable
 
-from asibot import keys
+from asibot import keys, verbs
 from asibot.bus import Bus, Publisher
-from asibot.errors import RpcError, arguments as _only, quote
+from asibot.errors import RpcError
 from asibot.messages import Event
+from asibot.verbs import Field, Text, Verb
 from asibot.web.runner import ProgramRunner, RunResult
-from asibot.web.userdata import UserData, UserDataError
+from asibot.web.userdata import MAX_NAME, UserData, UserDataError
 
 log = logging.getLogger("asibot.web.tasks")
+
+#: The verbs of `keys.tasks_rpc`. Whether the task exists and the robot is live are the
+#: desk's checks, with their own sentences.
+VERBS = {
+    "list": Verb(doc="the Task Creator's tasks: name, program and the words that launch each"),
+    "launch": Verb({"task": Field(Text("a task name", longest=MAX_NAME), required=True),
+                    "robot": Field(Text("a robot id"), required=True)},
+                   doc="start a task's program on a live robot, as the Launcher's button does"),
+    "stop": Verb(doc="stop the running program"),
+    "status": Verb(doc="the running program, and how the last one ended"),
+}
 
 
 class TaskDesk:
@@ -32,8 +44,8 @@ class TaskDesk:
     def __init__(self, bus: Bus, data: UserData, runner: ProgramRunner, is_live: Callable[[str], bool]) -> None:
         self.bus, self.data, self.runner, self.is_live = bus, data, runner, is_live
         self._events: dict[str, Publisher[Event]] = {}
-        for verb in keys.RPC_VERBS_TASKS:
-            bus.serve(keys.tasks_rpc(verb), getattr(self, f"_rpc_{verb}"))
+        verbs.serve(bus, keys.tasks_rpc, VERBS, {"list": self._list, "launch": self._launch,
+                                                 "stop": self._stop, "status": self._status})
 
     def launch(self, name: str, robot: str) -> dict:
         """Start task `name` on `robot` (the Launcher's button does the same)."""
@@ -64,29 +76,19 @@ class TaskDesk:
             log.warning("could not tell %s about its task: %s", robot, exc)
 
     # --- the RPC verbs ---------------------------------------------------------------------
-    def _rpc_list(self, req: dict) -> dict:
-        _only(req, "list")
+    def _list(self, a: Any) -> dict:
         return {"tasks": [{"name": t.name, "program": t.program, "words": list(t.words)}
                           for t in self.data.tasks()]}
 
-    def _rpc_launch(self, req: dict) -> dict:
-        _only(req, "launch", "task", "robot")
-        name, robot = req.get("task"), req.get("robot")
-        if not isinstance(name, str) or not name.strip():
-            raise RpcError("bad_request", f"launch needs the task's name as text; got {quote(name, 30)}.")
-        if not isinstance(robot, str) or not robot:
-            raise RpcError("bad_request", f"launch needs the robot to run on; got {quote(robot, 30)}.")
+    def _launch(self, a: Any) -> dict:
         try:
-            return self.launch(name.strip(), robot)
+            return self.launch(a.task, a.robot)
         except UserDataError as exc:
             raise RpcError("bad_request", str(exc)) from None
 
-    def _rpc_stop(self, req: dict) -> dict:
-        _only(req, "stop")
+    def _stop(self, a: Any) -> dict:
         self.runner.stop("stopped from another program")
         return {}
 
-    def _rpc_status(self, req: dict) -> dict:
-        _only(req, "status")
+    def _status(self, a: Any) -> dict:
         return self.runner.status()
-
