@@ -110,8 +110,8 @@ _OPERATOR = [
 PROGRAM_CART_VERBS = ("stat", "inv", "fwd", "movj", "movl", "movv", "movjv", "relj", "stop", "wait",
                       "tool", "act", "home")
 PROGRAM_NAV_VERBS = ("goto", "cancel", "result", "status", "places", "save_place", "rename_place",
-                     "remove_place", "drive", "turn", "primitive", "set_pose", "map_start", "map_stop",
-                     "map_save")
+                     "remove_place", "save_position", "recall_position", "drive", "turn", "primitive",
+                     "settings", "set_pose", "map_start", "map_stop", "map_save")
 _PROGRAM = [
     (("query",), _robots(*(lambda r, v=v: keys.cart_rpc(r, v) for v in PROGRAM_CART_VERBS))
      + _robots(*(lambda r, v=v: keys.nav_rpc(r, v) for v in PROGRAM_NAV_VERBS))),

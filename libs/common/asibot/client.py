@@ -38,9 +38,17 @@ class _Client:
         self.timeout = timeout
         self._bus: Bus | None = None
         self._owns_bus = True
-        self._me = Identity("program")   # signs its estops and releases (asibot.safety.estop)
+        self._identity: Identity | None = None
         if robot:
             self.open(robot)
+
+    @property
+    def _me(self) -> Identity:
+        """Signs this program's estops and releases (asibot.safety.estop); made on first use, as
+        a client over a service's bus (the web's, the bridge's) never signs with it."""
+        if self._identity is None:
+            self._identity = Identity("program")
+        return self._identity
 
     @classmethod
     def on(cls, bus: Bus, robot: str, timeout: float = CALL_TIMEOUT) -> Self:
@@ -149,8 +157,10 @@ class CartesianClient(_Client):
         """Straight line to a point, null start/end velocity; speed in m/s."""
         return self._call("movl", point=point, duration=duration, speed=speed)["duration"]
 
-    def relj(self, joints: Sequence[float], *, duration: float | None = None) -> float:
-        return self._call("relj", joints=joints, duration=duration)["duration"]
+    def relj(self, joints: Sequence[float], *, duration: float | None = None, speed: float | None = None) -> float:
+        """Joint-space move by `joints` (deg) from where the arm is; `speed` is a fraction of
+        each joint's top speed. Returns the planned duration."""
+        return self._call("relj", joints=joints, duration=duration, speed=speed)["duration"]
 
     def movv(self, velocity: Sequence[float]) -> None:
         """Stream a velocity (m/s, deg/s); send again within 200 ms to keep moving."""
@@ -160,8 +170,17 @@ class CartesianClient(_Client):
         """Stream joint velocities (deg/s, one per joint); send again within 200 ms to keep moving."""
         self._call("movjv", velocity=velocity)
 
-    def home(self) -> float:
-        return self._call("home")["duration"]
+    def home(self, *, duration: float | None = None, speed: float | None = None) -> float:
+        """Joint-space move to the arm's home posture; returns the planned duration."""
+        return self._call("home", duration=duration, speed=speed)["duration"]
+
+    def pointer(self, deadman: bool, direction: str = "hold", yaw: float = 0.0, pitch: float | None = None,
+                speed: float | None = None) -> None:
+        """One reading of a handheld pointer: while `deadman` is held the tool turns at `yaw`
+        (deg/s), tilts to `pitch` (deg) and goes "forward" or "backward" along itself at
+        `speed` (m/s); send again within 200 ms to keep moving, or with deadman False to stop.
+        The page's verb: a program run by the page's runner may not call it (docs/sandbox.md)."""
+        self._call("pointer", deadman=deadman, direction=direction, yaw=yaw, pitch=pitch, speed=speed)
 
     def wait(self, timeout: float | None = None) -> bool:
         """Block until the motion ends. On timeout the motion is stopped and Timeout is raised."""
@@ -202,7 +221,8 @@ class CartesianClient(_Client):
         by `step` deg (a movj), or a coordinate of the point ("x", "y", "z" by m, "rot(y')",
         "rot(z'')" by deg; a movl), at speed level `level` (1 slowest to 5). A step asked while
         the previous one still moves goes on from that step's target, so steps add up as on a
-        pendant. The reply: {"duration": s} and the step's target, "joints" (deg) or "point"."""
+        pendant. The reply: {"duration": s} and the step's target, "joints" (deg) or "point".
+        The page's verb: a program run by the page's runner may not call it (docs/sandbox.md)."""
         return self._call("jog", axis=axis, step=step, level=level)
 
 
@@ -365,6 +385,14 @@ class NavClient(_Client):
         """One level "faster", "slower", "wider" or "narrower" (asibot.driving.CHANGES) of the
         primitives' speed or width; without `change`, the levels now."""
         return cast(NavClient.Levels, self._call("settings", change=change))
+
+    def save_position(self) -> list[float]:
+        """Remember where the robot stands (one position, apart from the named places); its pose."""
+        return self._call("save_position")["pose"]
+
+    def recall_position(self) -> Trip:
+        """Go back to the position save_position remembered; the trip started."""
+        return cast(NavClient.Trip, self._call("recall_position"))
 
     def set_pose(self, pose: Sequence[float]) -> None:
         """Tell localisation where the robot is (x, y, theta in m, m, rad, map frame)."""

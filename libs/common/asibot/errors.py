@@ -67,18 +67,6 @@ class BadRequest(RpcError):
     code = "bad_request"
 
 
-def arguments(req: object, verb: str, *allowed: str) -> dict:
-    """An RPC request as its map of arguments, refused with a sentence when it is not a map or
-    has an argument the verb does not take (a typo must not be silently ignored)."""
-    if not isinstance(req, dict):
-        raise BadRequest(f"{verb} takes a map of arguments; got {quote(req, 30)}.")
-    unknown = set(req) - set(allowed)
-    if unknown:
-        takes = f"takes only {', '.join(allowed)}" if allowed else "takes no arguments"
-        raise BadRequest(f"{verb} {takes}, not {', '.join(sorted(map(str, unknown)))[:80]}.")
-    return req
-
-
 class Timeout(RpcError):
     code = "timeout"
 

@@ -15,6 +15,17 @@ from asibot.poses import POINT_AXES
 #: joint's maximum speed for a joint step (a movj), of STEP_LINEAR_SPEED for a Cartesian step
 #: (a movl).
 SPEED_LEVELS: tuple[float, ...] = (0.1, 0.25, 0.5, 0.75, 1.0)
+
+
+def speed_fraction(level: int) -> float:
+    """The fraction of the top speed that `level` (1 to 5) moves at. A level outside them is a
+    ValueError here, where the table is, and never wraps round to the top speed (level 0 would
+    be SPEED_LEVELS[-1])."""
+    if isinstance(level, bool) or not isinstance(level, int) or not 1 <= level <= len(SPEED_LEVELS):
+        raise ValueError(f"The speed level must be 1 to {len(SPEED_LEVELS)}; got {level!r}.")
+    return SPEED_LEVELS[level - 1]
+
+
 #: A Cartesian step (a movl) at the top level moves at this linear speed, m/s.
 STEP_LINEAR_SPEED = 0.10
 

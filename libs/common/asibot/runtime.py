@@ -108,10 +108,13 @@ def parser(service: str, add_arguments: Callable[[argparse.ArgumentParser], None
     return p
 
 
-def robot_id(args: argparse.Namespace, default: str) -> str:
+def robot_id(args: argparse.Namespace, default: str | None = None, *, example: str = "asibot-sim") -> str:
     """The service's --robot (or `default`), checked once here: a ValueError that names --robot
-    and says what a robot id may be, so `build` refuses before anything starts."""
+    and says what a robot id may be, so `build` refuses before anything starts. Without a
+    `default`, --robot is required, and the sentence says what to give (`example`)."""
     robot = args.robot or default
+    if not robot:
+        raise ValueError(f"--robot is required: the robot this service works for, e.g. {example}")
     try:
         keys.robot(robot)
     except ValueError as exc:

@@ -259,8 +259,7 @@ class Dispatcher:
 
     def _settings(self, s: Session, change: str) -> str:
         with self._nav(s.robot) as nav:
-            # NavClient has no `settings` method yet: its verb by name until it has.
-            return nav._call("settings", change=change)["text"]
+            return nav.settings(change)["text"]
 
     def _do_faster(self, s: Session, arg: str) -> str:
         s.target = vocab.BASE
@@ -296,22 +295,19 @@ class Dispatcher:
             raise RpcError("bad_request", f"unknown place '{place[:40]}'{vocab.suggest(place, names)} "
                                           f"(places: {known})")
         with self._nav(s.robot) as nav:
-            # NavClient.goto answers the goal's id alone; the user hears nav's sentence.
-            reply = nav._call("goto", place=found)
+            reply = nav.goto_reply(found)
         self._started(s, f"goto {found}", False)
         return reply.get("text") or f"going to {found}"
 
     def _do_save_position(self, s: Session, arg: str) -> str:
         with self._nav(s.robot) as nav:
-            # NavClient has no `save_position` method yet: its verb by name until it has.
-            nav._call("save_position")
+            nav.save_position()
         s.target = vocab.BASE
         return "position saved"
 
     def _do_recall_position(self, s: Session, arg: str) -> str:
         with self._nav(s.robot) as nav:
-            # NavClient has no `recall_position` method yet: its verb by name until it has.
-            reply = nav._call("recall_position")
+            reply = nav.recall_position()
         self._started(s, "recall position", False)
         return reply.get("text") or "going back to the saved position"
 

@@ -14,6 +14,8 @@ import difflib
 from dataclasses import dataclass
 from typing import Collection
 
+from asibot import driving
+
 MAX_COMMAND_CHARS = 200
 
 BASE, ARM, BOTH, BRIDGE, TASKS = "base", "arm", "base or arm", "bridge", "tasks"
@@ -41,6 +43,9 @@ PRIMITIVES: dict[str, tuple[str, bool]] = {
     "turn left 90": ("turn left 90", False),
     "turn right 90": ("turn right 90", False),
 }
+_NOT_NAV = sorted(name for name, _ in PRIMITIVES.values() if name not in driving.PRIMITIVES)
+if _NOT_NAV:   # the bridge says only what nav can do
+    raise RuntimeError(f"the bridge's base words name primitives nav does not have: {_NOT_NAV}")
 
 #: Arm step words -> unit direction in the arm's base frame (x ahead, y left, z up).
 ARM_STEPS: dict[str, tuple[int, int, int]] = {

@@ -66,7 +66,7 @@ POINTER = Verb({
     "yaw": Field(Number(-MAX_POINTER_YAW, MAX_POINTER_YAW, "deg/s"), default=0.0),
     "pitch": Field(Number(-MAX_POINTER_PITCH, MAX_POINTER_PITCH, "deg")),
     "speed": Field(Number(0.0, MAX_POINTER_SPEED, "m/s", open_low=True), default=POINTER_SPEED),
-}, needs_driver=True)
+}, needs_driver=True, doc="one reading of a handheld pointer: the tool follows it while the dead-man is held")
 
 
 def verbs(n_joints: int) -> dict[str, Verb]:
@@ -81,26 +81,34 @@ def verbs(n_joints: int) -> dict[str, Verb]:
                    (Number(-MAX_TOOL_OFFSET, MAX_TOOL_OFFSET, "m"),) * 3
                    + (Number(-MAX_TOOL_ANGLE, MAX_TOOL_ANGLE, "deg"),) * 3)
     return {
-        "stat": Verb(needs_driver=True),
-        "inv": Verb({"point": Field(p, required=True)}),
-        "fwd": Verb({"joints": Field(q, required=True)}),
+        "stat": Verb(needs_driver=True, doc="where the arm is: state, point, joints, estop, fault"),
+        "inv": Verb({"point": Field(p, required=True)}, doc="the joints that put the tool at a point; nothing moves"),
+        "fwd": Verb({"joints": Field(q, required=True)}, doc="the point the tool is at for some joints; nothing moves"),
         "movj": Verb({"point": Field(p), "joints": Field(q), "duration": DURATION, "speed": JOINT_SPEED},
-                     needs_driver=True),
+                     needs_driver=True, doc="a joint-space move to a point or to joints"),
         "movl": Verb({"point": Field(p, required=True), "duration": DURATION,
-                      "speed": Field(Number(MIN_LINEAR_SPEED, MAX_LINEAR_SPEED, "m/s"))}, needs_driver=True),
-        "movv": Verb({"velocity": Field(velocity, required=True)}, needs_driver=True),
-        "movjv": Verb({"velocity": Field(joint_velocity, required=True)}, needs_driver=True),
+                      "speed": Field(Number(MIN_LINEAR_SPEED, MAX_LINEAR_SPEED, "m/s"))}, needs_driver=True,
+                     doc="a straight line of the tool to a point"),
+        "movv": Verb({"velocity": Field(velocity, required=True)}, needs_driver=True,
+                     doc="stream a velocity of the tool; again within 200 ms to keep moving"),
+        "movjv": Verb({"velocity": Field(joint_velocity, required=True)}, needs_driver=True,
+                      doc="stream joint velocities; again within 200 ms to keep moving"),
         "relj": Verb({"joints": Field(q, required=True), "duration": DURATION, "speed": JOINT_SPEED},
-                     needs_driver=True),
-        "home": Verb({"duration": DURATION, "speed": JOINT_SPEED}, needs_driver=True),
-        "stop": Verb(strict=False),
-        "wait": Verb({"timeout": Field(Number(0.0, MAX_WAIT_REQUEST, "s", open_low=True), default=MAX_WAIT)}),
-        "tool": Verb({"tool": Field(tool, also="or null to remove it")}),
-        "act": Verb({"action": Field(OneOf(("open", "close")), required=True)}),
+                     needs_driver=True, doc="a joint-space move by some joint steps from here"),
+        "home": Verb({"duration": DURATION, "speed": JOINT_SPEED}, needs_driver=True,
+                     doc="a joint-space move to the arm's home posture"),
+        "stop": Verb(strict=False, doc="stop the arm, whoever moved it"),
+        "wait": Verb({"timeout": Field(Number(0.0, MAX_WAIT_REQUEST, "s", open_low=True), default=MAX_WAIT)},
+                     doc="wait until the motion ends (done) or the timeout passes"),
+        "tool": Verb({"tool": Field(tool, also="or null to remove it")},
+                     doc="attach a tool frame: points are the tool point's from then on"),
+        "act": Verb({"action": Field(OneOf(("open", "close")), required=True)},
+                    doc="open or close the gripper; answers once the fingers stopped, and whether it holds"),
         "pointer": POINTER,
         # One step of one axis (the page's step buttons): a joint (movj) or a coordinate of the
         # point (movl) by a signed step, at one of the page's speed levels.
         "jog": Verb({"axis": Field(OneOf(jog.axes(n_joints)), required=True),
                      "step": Field(Number(-MAX_JOINT, MAX_JOINT, "deg (m for x, y, z)"), required=True),
-                     "level": Field(Whole(1, len(jog.SPEED_LEVELS)), required=True)}, needs_driver=True),
+                     "level": Field(Whole(1, len(jog.SPEED_LEVELS)), required=True)}, needs_driver=True,
+                    doc="one step of one axis, added to the previous step's target while it moves"),
     }

@@ -29,7 +29,7 @@ from typing import Any, Callable
 import numpy as np
 
 from asibot import keys, verbs
-from asibot.jog import SPEED_LEVELS, STEP_LINEAR_SPEED, axes as jog_axes
+from asibot.jog import STEP_LINEAR_SPEED, axes as jog_axes, speed_fraction
 from asibot.safety import ownership
 from asibot.errors import RpcError
 from asibot.safety.estop import EStopState
@@ -253,7 +253,7 @@ class KinematicsServer(Service):
         Replies the duration and the step's target: `joints` (deg) or `point`."""
         i = self._jog_axes.index(a.axis)
         joint = i < self.n
-        fraction = SPEED_LEVELS[a.level - 1]
+        fraction = speed_fraction(a.level)
         with self._jog_lock:
             base, running = self.ctl.jog_from(MOVJ if joint else MOVL)
             # The step is added in the user's units, as the page shows the axis.

@@ -21,9 +21,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def build(bus: Bus, args: argparse.Namespace) -> KinematicsServer:
-    if not args.robot:     # no default: which arm to control is the user's choice
-        raise ValueError("--robot is required: asibot-sim, asibot, pioneer-sim or pioneer")
-    robot = runtime.robot_id(args, args.robot)
+    # No default: which arm to control is the user's choice.
+    robot = runtime.robot_id(args, example="asibot-sim, asibot, pioneer-sim or pioneer")
     try:
         spec = robots.get(robot)
     except KeyError as exc:

@@ -367,9 +367,7 @@ def _start_pose(text: str, places: Places) -> Pose:
 
 
 def build(bus: Bus, args: argparse.Namespace) -> NavService:
-    if not args.robot:   # no default: nav would wait for a robot nobody named
-        raise ValueError("--robot is required: the robot to navigate, e.g. pioneer-sim (nav has no default robot)")
-    robot = robot_id(args, default="")
+    robot = robot_id(args, example="pioneer-sim")   # no default: nav would wait for a robot nobody named
     if not 5.0 <= args.rate <= 50.0:
         raise ValueError(f"--rate must be between 5 and 50 Hz; got {args.rate:g}")
     try:

@@ -288,9 +288,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def build(bus: Bus, args: argparse.Namespace) -> PerceptionService:
-    if not args.robot:     # no default: which robot's cameras to read is the user's choice
-        raise ValueError("--robot is required: the robot whose cameras to read, e.g. pioneer-sim")
-    robot = runtime.robot_id(args, args.robot)
+    # No default: which robot's cameras to read is the user's choice.
+    robot = runtime.robot_id(args, example="pioneer-sim")
     rgb = args.rgb_camera or None
     for name in (*args.depth_cameras, *([rgb] if rgb else [])):
         keys.camera_depth(robot, name)          # a ValueError with a sentence for a bad name

@@ -24,7 +24,7 @@ from asibot.bus import Bus
 from asibot.client import CartesianClient
 from asibot.errors import RpcError
 # The speed levels and a Cartesian step's speed are the kinematics `jog` verb's too.
-from asibot.jog import SPEED_LEVELS, STEP_LINEAR_SPEED, axes as jog_axes
+from asibot.jog import SPEED_LEVELS, STEP_LINEAR_SPEED, axes as jog_axes, speed_fraction
 from asibot.safety.estop import who
 from asibot.safety.identity import Identity
 from asibot.poses import POINT_AXES
@@ -107,7 +107,7 @@ class Motion:
         else:
             top = self.settings.hold_linear if axis < 3 else self.settings.hold_angular
         v = [0.0] * size
-        v[axis] = direction * top * SPEED_LEVELS[level - 1]
+        v[axis] = direction * top * speed_fraction(level)
         return v
 
     def hold(self, robot: str, space: str, axis: int, direction: int, level: int) -> None:
@@ -126,8 +126,7 @@ class Motion:
         ends the stream at once) otherwise. A bad report never gets here: the page's message
         is refused where it is read, and the refusal stops the pointer's stream."""
         request = self.pointer.request(reading, tool_pitch)
-        # CartesianClient has no `pointer` method yet: the verb by name until it has.
-        self._arm(robot)._call("pointer", **(request or {"deadman": False}))
+        self._arm(robot).pointer(**(request or {"deadman": False}))
 
     # --- moves ----------------------------------------------------------------------------
     def move(self, robot: str, kind: str, values: Sequence[float], *, relative: bool = False,
@@ -135,13 +134,12 @@ class Motion:
         """The seed's movj/movl forms (`kind`): to a point (or joints) or by an offset from here;
         {"duration": s}. The kinematics service checks every value; what is checked here is
         how the request's parts fit together, which no request model says."""
-        arm, fraction = self._arm(robot), SPEED_LEVELS[level - 1]
+        arm, fraction = self._arm(robot), speed_fraction(level)
         if joints:
             if kind != "movj":
                 raise RpcError("bad_request", "Joint values move with movj; movl takes a point.")
             if relative:
-                # CartesianClient.relj takes no `speed` yet: the verb by name until it does.
-                return {"duration": arm._call("relj", joints=values, speed=fraction)["duration"]}
+                return {"duration": arm.relj(values, speed=fraction)}
             return {"duration": arm.movj(joints=values, speed=fraction)}
         if relative:
             here = arm.stat()
@@ -157,8 +155,7 @@ class Motion:
         return self._arm(robot).inv(point)
 
     def home(self, robot: str, level: int = 3) -> dict:
-        # CartesianClient.home takes no `speed` yet: the verb by name until it does.
-        return {"duration": self._arm(robot)._call("home", speed=SPEED_LEVELS[level - 1])["duration"]}
+        return {"duration": self._arm(robot).home(speed=speed_fraction(level))}
 
     def stop(self, robot: str) -> dict:
         self._arm(robot).stop()
