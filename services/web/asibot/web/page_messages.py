@@ -45,7 +45,8 @@ class Refused(Exception):
 
     def json(self) -> str:
         code = {} if self.code is None else {"code": self.code}
-        return json.dumps({"type": "refused", **code, "text": self.text})
+        robot = {} if self.robot is None else {"robot": self.robot}   # the page names it
+        return json.dumps({"type": "refused", **code, **robot, "text": self.text})
 
 
 def _refuse(code: str, sentence: str) -> PydanticCustomError:

@@ -95,9 +95,11 @@ class RunResult:
 class ProgramRunner:
     """Runs one user program at a time in a child process with limits (see the module doc).
 
-    Callbacks run on the runner's threads: `on_output(stream, line)` with stream "out" or
-    "err" (calls are serialised), `stop_robot(robot)` when a run ends in anything but a clean
-    exit, then `on_exit(result)`. Their exceptions are logged and otherwise ignored.
+    Callbacks run on the runner's threads: `on_start(status)` once a run has started, before
+    any of its output (with `status()` of the new run; it runs inside `start`, so it must be
+    quick and must not call the runner), `on_output(stream, line)` with stream "out" or "err"
+    (calls are serialised), `stop_robot(robot)` when a run ends in anything but a clean exit,
+    then `on_exit(result)`. Their exceptions are logged and otherwise ignored.
     """
 
     def __init__(self, python: str = sys.executable, limits: Limits | None = None,
@@ -105,13 +107,15 @@ class ProgramRunner:
                  on_output: Callable[[str, str], None] | None = None,
                  on_exit: Callable[[RunResult], None] | None = None,
                  stop_robot: Callable[[str], None] | None = None,
-                 *, sandbox: Sandbox | None = None) -> None:
+                 *, sandbox: Sandbox | None = None,
+                 on_start: Callable[[dict[str, Any]], None] | None = None) -> None:
         self.python = python
         self.sandbox = sandbox if sandbox is not None else Sandbox()
         self.limits = limits or Limits()
         self.env = dict(env or {})
         self.on_output = on_output
         self.on_exit = on_exit
+        self.on_start = on_start
         self.stop_robot = stop_robot
         self._lock = threading.Lock()         # guards the run's state below
         self._signal_lock = threading.Lock()  # signals vs reaping: never signal a reaped pgid
@@ -177,6 +181,8 @@ class ProgramRunner:
             self._ring.clear()
             self._reaped.clear()
             self._done.clear()
+            # Before its first line: a page that hears of the run clears the last run's output.
+            _call(self.on_start, self._status())
             tail: collections.deque[str] = collections.deque(maxlen=STDERR_TAIL)
             readers = [threading.Thread(target=self._read, args=(proc.stdout, "out", None),
                                         name=f"runner-out-{proc.pid}", daemon=True),
@@ -239,11 +245,15 @@ class ProgramRunner:
 
     def status(self) -> dict[str, Any]:
         with self._lock:
-            running = not self._done.is_set()
-            return {"program": self._program or None, "robot": self._robot or None,
-                    "pid": self._proc.pid if running and self._proc else None,
-                    "running": running, "started": self._started or None,
-                    "last": dataclasses.asdict(self._last) if self._last else None}
+            return self._status()
+
+    def _status(self) -> dict[str, Any]:
+        """status(), with the lock held."""
+        running = not self._done.is_set()
+        return {"program": self._program or None, "robot": self._robot or None,
+                "pid": self._proc.pid if running and self._proc else None,
+                "running": running, "started": self._started or None,
+                "last": dataclasses.asdict(self._last) if self._last else None}
 
     # -- threads ---------------------------------------------------------------------------
 

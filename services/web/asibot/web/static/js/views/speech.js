@@ -4,6 +4,7 @@
 // the user says a word: the next phrase said into the microphone becomes a pronunciation of it.
 import { api, onMessage, paths, state } from '../api.js';
 import { listening, onListening, startListening, stopListening } from '../microphone.js';
+import { kept, setKept } from '../keep.js';
 import { attempt, el, notify } from '../ui.js';
 
 const HEARD_KEPT = 8;
@@ -100,7 +101,7 @@ export default {
   title: 'Speech',
   mount(root) {
     const list = el('ul', { class: 'points', 'aria-label': 'Words and phrases' });
-    const word = el('input', { type: 'text', 'aria-label': 'Word or phrase', placeholder: 'give me the red can', maxlength: '80' });
+    const word = kept('speech.word', el('input', { type: 'text', 'aria-label': 'Word or phrase', placeholder: 'give me the red can', maxlength: '80' }));
     const learnNote = el('p', { class: 'muted' });
     const refresh = async () => {
       const { words } = await api.get(paths.words);
@@ -113,7 +114,7 @@ export default {
     };
     const add = () => attempt(async () => {
       const r = await api.post(paths.words, { text: word.value.trim() });
-      word.value = '';
+      setKept(word, '');
       await refresh();
       return r;
     }, (r) => `"${r.word}" recorded.`);
