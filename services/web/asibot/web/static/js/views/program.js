@@ -1,13 +1,16 @@
-// Program tab: an IDE for the user's Python programs. CodeMirror 6 with Python highlighting; new
-// programs from the template; point buttons that insert a point and a movl at the cursor; save
-// (the previous version is kept), rename, delete, syntax check with line numbers; Run and Stop
-// with the program's output live in the page, and the run's state as the server tells it.
+// Program tab: an IDE for the user's Python programs. CodeMirror 6 with Python highlighting and
+// the clients' methods as completions; new programs from the template; buttons that insert a
+// gripper call, or a point and a movl, at the cursor; save (the previous version is kept),
+// rename, delete, syntax check with line numbers; Run and Stop with the program's output live in
+// the page, the run's state as the server tells it, a failed run as one sentence with its line
+// (the traceback under Details); beside the editor, the clients' reference (pyhelp.js).
 // Unsaved text is a draft, kept per program in this browser until it is saved or discarded: a
 // tab switch, another program opened or a reload loses nothing.
 import { EditorView, basicSetup, python, keymap } from '/static/vendor/codemirror.js';
 import { api, onChange, onMessage, paths, state } from '../api.js';
 import { kept, setKept } from '../keep.js';
 import { loadPoints, onPointsChange } from '../points.js';
+import { completeClients, referencePanel } from '../pyhelp.js';
 import { about, attempt, attemptOn, confirmable, el, notify } from '../ui.js';
 
 let current = sessionStorage.getItem('asibot.program');  // the program open in the editor
@@ -46,23 +49,47 @@ function clientName(text) {
   return m ? m[1] : 'simCart';
 }
 
+let detailsCount = 0;   // ids of the Details a panel shows
+
 // The running (or last) program's state and output, as the server has them: GET /api/run when
 // shown and after a lost connection, then the feed's `run` messages (a run started, a run ended,
-// however it was launched) and its `output` lines.
-export function outputPanel() {
+// however it was launched) and its `output` lines. A run that ended in a Python error: its
+// sentence ("Line 7: ..."), and its traceback under Details, which the server took out of the
+// output. `lineButton(last)`: a control that shows that line (the Program tab's editor), or null.
+export function outputPanel({ lineButton = () => null } = {}) {
   const out = el('div', { class: 'output', role: 'log', 'aria-label': 'Program output', 'aria-live': 'polite' });
   const status = el('p', { role: 'status', class: 'big run-status' });
+  const failure = el('div', { class: 'run-error', 'aria-live': 'polite', hidden: true });
   let shownRun = null;   // `started` of the run whose output is shown
+  let shownEnd = null;   // the last run's end, as shown
   const line = (stream, text) => {
     out.append(el('div', { class: stream === 'err' ? 'err' : '' }, text));
     while (out.childNodes.length > 500) out.firstChild.remove();
     out.scrollTop = out.scrollHeight;
   };
+  const showFailure = (last) => {
+    shownEnd = last;
+    if (!last || !last.error) { failure.hidden = true; failure.replaceChildren(); return; }
+    const id = `run-details-${++detailsCount}`;
+    const details = el('pre', { id, class: 'run-details', tabindex: '0', role: 'region', 'aria-label': 'Traceback', hidden: true }, last.details.join('\n'));
+    const toggle = el('button', {
+      type: 'button', 'aria-expanded': 'false', 'aria-controls': id,
+      onclick: () => {
+        details.hidden = !details.hidden;
+        toggle.setAttribute('aria-expanded', String(!details.hidden));
+      },
+    }, 'Details');
+    failure.replaceChildren(el('p', { class: 'run-error-sentence' }, last.error),
+      el('div', { class: 'row' }, toggle, lineButton(last)), details);
+    failure.hidden = false;
+  };
   const show = (s) => {
     if (s.running && s.started !== shownRun) { shownRun = s.started; out.replaceChildren(); }   // a new run
     if (s.running) status.textContent = `${s.program} is running on ${s.robot} (started ${clock(s.started)}).`;
+    else if (s.last && s.last.error) status.textContent = `${about(s.last.robot, `${s.last.program} failed.`)} Ended ${clock(s.last.ended)}.`;
     else if (s.last) status.textContent = `${about(s.last.robot, `${s.last.program}: ${s.last.reason}.`)} Ended ${clock(s.last.ended)}.`;
     else status.textContent = 'No program has run yet.';
+    showFailure(s.running ? null : s.last);
   };
   const reload = () => api.get(paths.run).then((s) => {
     shownRun = s.started;
@@ -72,13 +99,17 @@ export function outputPanel() {
   }).catch((e) => notify(e.message));
   const off = onMessage((msg) => {
     if (msg.type === 'output') line(msg.stream, msg.line);
-    if (msg.type === 'run') show(msg.status);
+    // An error's end: the output as the server keeps it, without the traceback it shows as details.
+    if (msg.type === 'run' && !msg.status.running && msg.status.last && msg.status.last.error) reload();
+    else if (msg.type === 'run') show(msg.status);
   });
   // Back after a lost connection: what happened meanwhile is only on the server.
   const offFeed = onChange((what) => { if (what === 'feed' && state.feed === 'live') reload(); });
   reload();
   const clear = () => out.replaceChildren();
-  return { node: el('div', {}, status, out), clear, show, unmount: () => { off(); offFeed(); } };
+  // Draw the failure again (the Program tab opened another program: its line button may change).
+  const redraw = () => showFailure(shownEnd);
+  return { node: el('div', {}, status, failure, out), clear, show, redraw, unmount: () => { off(); offFeed(); } };
 }
 
 export function stopProgramButton() {
@@ -97,7 +128,13 @@ export default {
     const versions = el('div', { class: 'chips', role: 'group', 'aria-label': 'Previous versions' });
     const pointButtons = el('div', { class: 'chips', role: 'group', 'aria-label': 'Insert a point' });
     const holder = el('div', { class: 'editor' });
-    const output = outputPanel();
+    const reference = referencePanel();
+    // A failed run of the open program: a button that shows its line.
+    const output = outputPanel({
+      lineButton: (last) => (last.line && last.program === current ? el('button', {
+        type: 'button', onclick: () => goToLine(last.line, 1),
+      }, `Show line ${last.line}`) : null),
+    });
     let saved = '';      // the open program's text on the server
     let base = null;     // the saved text its draft began from (null: no draft)
 
@@ -126,10 +163,11 @@ export default {
       }
       showDraftState();
     };
+    const py = python();
     const editor = new EditorView({
       parent: holder,
       doc: '',
-      extensions: [basicSetup, python(),
+      extensions: [basicSetup, py, py.language.data.of({ autocomplete: completeClients }),
         keymap.of([{ key: 'Mod-s', preventDefault: true, run: () => { save(); return true; } }]),
         EditorView.updateListener.of((u) => { if (u.docChanged) keepDraft(); }),
         EditorView.contentAttributes.of({ 'aria-label': 'Program text' })],
@@ -142,14 +180,15 @@ export default {
       else keepDraft();
     };
 
+    // The cursor to `lineNo` (1-based), at `column`, in view.
+    const goToLine = (lineNo, column) => {
+      const line = editor.state.doc.line(Math.max(1, Math.min(lineNo, editor.state.doc.lines)));
+      editor.dispatch({ selection: { anchor: Math.min(line.to, line.from + Math.max(0, column - 1)) }, scrollIntoView: true });
+      editor.focus();
+    };
     const showProblems = (ps) => {
       problems.replaceChildren(...ps.map((p) => el('button', {
-        type: 'button', class: 'danger',
-        onclick: () => {
-          const line = editor.state.doc.line(Math.min(p.line, editor.state.doc.lines));
-          editor.dispatch({ selection: { anchor: line.from + Math.max(0, p.column - 1) }, scrollIntoView: true });
-          editor.focus();
-        },
+        type: 'button', class: 'danger', onclick: () => goToLine(p.line, p.column),
       }, `Line ${p.line}: ${p.message}`)));
     };
     const markChip = (b) => {
@@ -174,6 +213,8 @@ export default {
       const draft = drafts.get(name);
       base = draft ? draft.base : null;
       setText(draft && draft.text !== p.text ? draft.text : p.text, p.text);
+      reference.follow(text());
+      output.redraw();
       showProblems([]);
       versions.replaceChildren(...p.versions.slice(0, 8).map((v) => confirmable(`Restore ${clock(v.saved)}`, {
         class: null, title: `${v.size} bytes`,
@@ -235,11 +276,8 @@ export default {
       showDraftState();
       await refreshList();
     }, 'Program deleted (kept in the trash of the data folder).');
-    const insertPoint = (p) => {
-      const v = variable(p.name);
-      const client = clientName(text());
-      const values = p.values.map((x, i) => Number(x.toFixed(i < 3 ? 4 : 2))).join(', ');
-      const snippet = `${v} = [${values}]\n${client}.movl(${v})\n${client}.wait()\n`;
+    // `snippet` (whole lines) at the cursor: before its line when it is at the line's start, else after it.
+    const insertLines = (snippet) => {
       const at = editor.state.selection.main.head;
       const line = editor.state.doc.lineAt(at);
       const from = at === line.from ? at : line.to;
@@ -247,6 +285,17 @@ export default {
       editor.dispatch({ changes: { from, insert }, selection: { anchor: from + insert.length } });
       editor.focus();
     };
+    const insertPoint = (p) => {
+      const v = variable(p.name);
+      const client = clientName(text());
+      const values = p.values.map((x, i) => Number(x.toFixed(i < 3 ? 4 : 2))).join(', ');
+      insertLines(`${v} = [${values}]\n${client}.movl(${v})\n${client}.wait()\n`);
+    };
+    // The gripper's action ("open" or "close"; CartesianClient.act), on the program's client.
+    const insertGripper = (action) => insertLines(`${clientName(text())}.act("${action}")\n`);
+    const gripperButtons = el('div', { class: 'chips', role: 'group', 'aria-label': 'Insert a gripper call' },
+      el('button', { type: 'button', onclick: () => insertGripper('open') }, 'Insert: open gripper'),
+      el('button', { type: 'button', onclick: () => insertGripper('close') }, 'Insert: close gripper'));
     const offPoints = onPointsChange((data) => {
       pointButtons.replaceChildren(...(data.points.length ? data.points.map((p) => el('button', {
         type: 'button', 'aria-label': `Insert point ${p.name}`, onclick: () => insertPoint(p),
@@ -262,7 +311,7 @@ export default {
     // A program that waits for ever is stopped at its time limit (the server's sandbox).
     const minutes = kept('program.minutes', el('input', { type: 'number', id: 'run-minutes', min: '1', max: '240', value: '10', class: 'narrow' }));
 
-    root.replaceChildren(el('div', { class: 'columns' },
+    root.replaceChildren(el('div', { class: 'columns program-columns' },
       el('div', {},
         el('section', { class: 'panel', 'aria-label': 'Programs' },
           el('h2', {}, 'Programs'), list,
@@ -286,11 +335,15 @@ export default {
           el('button', { type: 'button', onclick: rename }, 'Rename'),
           discard,
           confirmable('Delete', {}, del)),
-        el('h3', {}, 'Insert a point (at the cursor: the point and a movl to it)'), pointButtons,
-        holder,
-        el('p', { class: 'muted' }, 'Esc in the editor: the first only closes its list of completions or its search box (with nothing open, it only warns); the second is the emergency stop.'),
-        problems,
-        el('h3', {}, 'Previous versions'), versions)));
+        el('h3', {}, 'Insert at the cursor: a gripper call, or a point and a movl to it'),
+        el('div', { class: 'row inserts' }, gripperButtons, pointButtons),
+        el('div', { class: 'editor-beside' },
+          el('div', {},
+            holder,
+            el('p', { class: 'muted' }, 'Esc in the editor: the first only closes its list of completions or its search box (with nothing open, it only warns); the second is the emergency stop.'),
+            problems,
+            el('h3', {}, 'Previous versions'), versions),
+          reference.node))));
     showDraftState();
     refreshList().catch((e) => notify(e.message));
     loadPoints().catch((e) => notify(e.message));
