@@ -109,7 +109,7 @@ export function about(robot, text) {
 // its success and its refusal both name the robot. No robot: the person is told to choose one.
 export function attemptOn(robot, action, success) {
   return attempt(async () => {
-    if (!robot) throw new Error('Choose a robot in the Connection Manager first.');
+    if (!robot) throw new Error('No robot commanded: press Command beside one in the Connection Manager first.');
     try {
       return await action(robot);
     } catch (e) {

@@ -58,7 +58,7 @@ export default {
     const update = () => {
       const r = chosenRobot();
       status.textContent = r ? `Commanding ${r.id} (${r.simulated ? 'simulated' : 'real'} ${r.arm || 'robot'}).`
-        : 'No robot chosen yet: choose one in the Connection Manager at the top.';
+        : 'No robot commanded yet: press Command beside one in the Connection Manager at the top.';
     };
     return { update };
   },

@@ -319,7 +319,7 @@ export default {
         el('section', { class: 'panel', 'aria-label': 'Run' },
           el('h2', {}, 'Run'),
           el('div', { class: 'row' }, el('button', { type: 'button', class: 'primary big', onclick: run }, 'Run'), stopProgramButton(),
-            el('label', { for: 'run-minutes' }, 'Time limit, minutes'), minutes),
+            el('label', { for: 'run-minutes' }, 'Time limit, minutes ', minutes)),
           output.node)),
       el('section', { class: 'panel', 'aria-label': 'Editor' },
         title, draftState,
