@@ -17,7 +17,7 @@ import pytest
 
 from asibot.testing import wait_until
 
-from .conftest import _stack, screenshot
+from .conftest import _stack, fresh_page, screenshot
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
 
@@ -48,20 +48,24 @@ def engaged(worlds, robot: str) -> bool:
 def page(browser, worlds):
     """A fresh page (its own storage) at 1280x800 that commands asibot-sim, both robots on it;
     both emergency stops released after the test."""
-    context = browser.new_context(viewport={"width": 1280, "height": 800})
-    page = context.new_page()
-    errors: list[str] = []
-    page.on("pageerror", lambda e: errors.append(str(e)))
-    page.goto(worlds.web_url)
-    page.wait_for_selector("body[data-ready=true]", timeout=15000)
-    for robot in ROBOTS:
-        page.wait_for_selector(f".robot-card[data-robot={robot}]", timeout=30000)
-    commanding(page, ASIBOT).wait_for(timeout=10000)
-    yield page
-    context.close()
+    try:
+        with fresh_page(browser, worlds.web_url, ROBOTS, (1280, 800)) as page:
+            commanding(page, ASIBOT).wait_for(timeout=10000)
+            yield page
+    finally:
+        for robot in ROBOTS:
+            http(worlds, "POST", f"/api/robots/{robot}/release")
+
+
+def second_esc_stops(page, worlds, hint) -> None:
+    """The first Esc was taken (the hint says so and nothing stopped); the second stops both
+    robots, which are then released for what the test does next."""
+    hint.get_by_text(HINT).wait_for(timeout=5000)
+    assert not any(engaged(worlds, r) for r in ROBOTS)
+    page.keyboard.press("Escape")
+    wait_until(lambda: all(engaged(worlds, r) for r in ROBOTS), timeout=10)
     for robot in ROBOTS:
         http(worlds, "POST", f"/api/robots/{robot}/release")
-    assert not errors, f"the page raised: {errors}"
 
 
 def commanding(page, robot: str):
@@ -125,12 +129,7 @@ def test_esc_closes_the_completion_list_and_the_second_esc_stops(page, worlds):
     page.keyboard.type("x")
     wait_until(lambda: hint.inner_text() == "", timeout=5)
     page.keyboard.press("Escape")
-    hint.get_by_text(HINT).wait_for(timeout=5000)
-    assert not any(engaged(worlds, r) for r in ROBOTS)
-    page.keyboard.press("Escape")
-    wait_until(lambda: all(engaged(worlds, r) for r in ROBOTS), timeout=10)
-    for robot in ROBOTS:
-        http(worlds, "POST", f"/api/robots/{robot}/release")
+    second_esc_stops(page, worlds, hint)
 
     # A name being changed: Esc cancels it; the next Esc stops.
     page.get_by_role("button", name="Rename", exact=True).click()
@@ -138,12 +137,7 @@ def test_esc_closes_the_completion_list_and_the_second_esc_stops(page, worlds):
     rename.wait_for()
     page.keyboard.press("Escape")
     rename.wait_for(state="detached", timeout=5000)
-    hint.get_by_text(HINT).wait_for(timeout=5000)
-    assert not any(engaged(worlds, r) for r in ROBOTS)
-    page.keyboard.press("Escape")
-    wait_until(lambda: all(engaged(worlds, r) for r in ROBOTS), timeout=10)
-    for robot in ROBOTS:
-        http(worlds, "POST", f"/api/robots/{robot}/release")
+    second_esc_stops(page, worlds, hint)
 
     # Anywhere else one Esc stops: the focus on a button.
     page.get_by_role("button", name="Check syntax").focus()

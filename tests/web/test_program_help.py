@@ -13,7 +13,7 @@ import pytest
 
 from asibot.web import reference
 
-from .conftest import ROOT, screenshot
+from .conftest import ROOT, fresh_page, screenshot
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
 
@@ -43,16 +43,8 @@ def http(stack, method: str, path: str, body: dict | None = None) -> dict:
 @pytest.fixture
 def page(browser, kitchen):
     """A fresh page (its own storage) at 1280x800 that commands asibot-sim."""
-    context = browser.new_context(viewport={"width": 1280, "height": 800})
-    page = context.new_page()
-    errors: list[str] = []
-    page.on("pageerror", lambda e: errors.append(str(e)))
-    page.goto(kitchen.web_url)
-    page.wait_for_selector("body[data-ready=true]", timeout=15000)
-    page.wait_for_selector(f".robot-card[data-robot={ROBOT}]", timeout=15000)
-    yield page
-    context.close()
-    assert not errors, f"the page raised: {errors}"
+    with fresh_page(browser, kitchen.web_url, (ROBOT,), (1280, 800)) as page:
+        yield page
 
 
 def open_program(page, kitchen, name: str, text: str):

@@ -335,7 +335,7 @@ export default {
           el('button', { type: 'button', onclick: rename }, 'Rename'),
           discard,
           confirmable('Delete', {}, del)),
-        el('h3', {}, 'Insert at the cursor: a gripper call, or a point and a movl to it'),
+        el('h3', {}, 'Insert at the cursor (a gripper call, or a point and a movl to it)'),
         el('div', { class: 'row inserts' }, gripperButtons, pointButtons),
         el('div', { class: 'editor-beside' },
           el('div', {},
