@@ -188,10 +188,12 @@ def test_a_new_goal_preempts_and_cancel_stops(stack):
     wait_until(lambda: standing_still(stack), 3, interval=0.05, message="the robot did not stop on cancel")
 
 
-@pytest.mark.timeout(600)
-def test_each_named_place_is_reached(stack):
+@pytest.mark.timeout(300)
+def test_the_shelf_is_reached_round_the_sofa(stack):
+    """The living room's way, round the sofa and the coffee table. Every named place is reached
+    by the navigator itself (tests/nav/test_navigator.py); the fridge by the tests around this."""
     places = stack.base.places()
-    for name in ("desk", "shelf", "charging station"):
+    for name in ("shelf",):
         result = stack.base.wait(stack.base.goto(name), timeout=150)
         assert result["text"] == f"arrived at {name}"
         ok, how = on_goal(stack.truth.pose, places[name])
@@ -242,9 +244,11 @@ def test_estop_ends_a_goal_and_nothing_resumes(stack):
 @pytest.mark.timeout(400)
 def test_a_kidnapped_robot_finds_itself_again(stack):
     office = (7.5, 6.0)
-    # The robot has been in use: it drove and knows how well the scans fit where it is. (Carried
-    # off before its first drive, its filter has only the start's wide cloud to compare with.)
-    stack.base.wait(stack.base.goto("fridge"), timeout=120)
+    # The robot has been in use: it drove (the tests before this one) and knows how well the
+    # scans fit where it is; a turn where it stands refreshes that. (Carried off before its first
+    # drive, its filter has only the start's wide cloud to compare with.)
+    stack.base.turn(180)
+    stack.base.wait(timeout=30)
     stack.bus.call(keys.driver_rpc(ROBOT, "set_robot_pose"), {"pose": [*office, 0.0]}, timeout=5)
     wait_until(lambda: math.dist(stack.truth.pose[:2], office) < 0.05, 5, message="the sim did not teleport the robot")
     assert math.dist(stack.base.pose()[:2], office) > 2.0, "nav knew of the kidnap before it could see"
