@@ -153,7 +153,7 @@ def test_a_silent_camera_is_announced_once_and_its_return_too(memory_bus):
                                          "watches are not seen; the scan covers only the front camera."),
             ("warning", "camera_silent", "The front camera has sent no depth image for 0.5 s: obstacles it "
                                          "watches are not seen; no scan is published."),
-            ("info", "camera_back", "The front camera works again."),
+            ("info", "camera_working", "The front camera works again."),
         ]
         behind = h.scans.last().ranges[np.r_[0:20, 700:720]]
         assert np.isnan(behind).all()             # the silent back camera's sector is unknown, not free

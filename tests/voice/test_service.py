@@ -438,3 +438,21 @@ def test_a_speaker_that_cannot_speak_breaks_nothing():
     commands.set_tasks([{"name": "Drink water", "words": ["drink"]}])
     outcome = commands.hear(heard("drink"))
     assert (outcome.action, outcome.said) == ("launch", "Starting Drink water.") and robots.launched == ["Drink water"]
+
+
+def test_a_task_creator_that_starts_after_the_voice_is_waited_for_without_a_warning(memory_bus, caplog):
+    """`asibot up` starts the web and the voice together: until the web answers, the voice waits
+    (health says so) and warns nobody; once it answers, its words are heard."""
+    voice_bus, web_bus = Bus("voice"), Bus("web")
+    args = runtime.parser(service.NAME, service.add_arguments).parse_args(["--quiet", "--refresh", "0.2"])
+    svc = service.build(voice_bus, args)
+    try:
+        wait_until(lambda: svc.health()["tasks"] == service.WAITING_FOR_TASKS)
+        desk = TaskDesk(web_bus, TASKS)
+        wait_until(lambda: "drink" in svc.words(), message="the words never came once the Task Creator answered")
+        assert svc.health()["tasks"] == "ok" and desk.verbs("list")
+        assert not [r for r in caplog.records if r.levelname == "WARNING" and "cannot update the words" in r.message]
+    finally:
+        svc.close()
+        voice_bus.close()
+        web_bus.close()

@@ -14,8 +14,10 @@ import pytest
 from asibot import keys
 from asibot import messages as m
 from asibot.bus import Bus
-from asibot.messages import EStop
+from asibot.errors import RpcError
+from asibot.messages import EStop, GripperState
 from asibot.testing import wait_until, release
+from asibot.web.fleet import gripper_words
 from asibot.web.motion import Motion
 
 from .conftest import API_ROBOT as ROBOT, API_START as START, settle
@@ -291,3 +293,17 @@ def test_the_voice_setting_without_the_voice_service_says_how_to_start_it(api):
     assert api.put("/api/voice", json={"confirm": True}).status_code == 503
     assert api.put("/api/voice", json={"confirm": "yes"}).status_code == 422
     assert api.put("/api/voice", json={"confirm": True, "shout": 1}).status_code == 422
+
+
+
+def test_a_real_robot_has_no_world_to_put_back(web):
+    client, svc, driver, server = web
+    with pytest.raises(RpcError, match="asibot is a real robot: there is no simulated world to put back."):
+        svc.web.motion.reset_world("asibot")
+
+
+@pytest.mark.parametrize("opening, holding, says", [
+    (0.08, False, "open (8.0 cm)"), (0.075, False, "open (7.5 cm)"), (0.04, False, "partly open (4.0 cm)"),
+    (0.002, False, "closed, empty"), (0.066, True, "closed, holding something (6.6 cm)")])
+def test_the_gripper_is_said_open_closed_or_holding(opening, holding, says):
+    assert gripper_words(GripperState(opening=opening, holding=holding), 0.08) == says

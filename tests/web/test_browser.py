@@ -187,6 +187,25 @@ def test_the_wizard_gives_me_the_red_can(page, kitchen, arm):
     assert abs(lifted[0] - can[0]) < 0.02 and abs(lifted[1] - can[1]) < 0.02
 
 
+def test_the_gripper_says_how_it_is_and_the_kitchen_is_put_back_from_the_page(page, kitchen):
+    """No way to put the world back, no sign whether the gripper is open or closed (issue 27)."""
+    kitchen.bus.call(keys.driver_rpc(ROBOT, "reset_world"), {}, timeout=10)
+    start = can_position(kitchen)
+    kitchen.bus.call(keys.driver_rpc(ROBOT, "set_object_pose"),
+                     {"name": "red_can", "pos": [start[0] + 0.15, start[1], start[2]]}, timeout=5)
+    wait_until(lambda: abs(can_position(kitchen)[0] - start[0]) > 0.1, timeout=5)
+    page.get_by_role("button", name=f"Put the kitchen of {ROBOT} back as it started").click()
+    page.get_by_text(f"{ROBOT}: the kitchen is back as it started.").wait_for(timeout=15000)
+    assert max(abs(a - b) for a, b in zip(can_position(kitchen), start)) < 0.01
+
+    page.goto(page.url.split("#")[0] + "#cartesian")
+    page.get_by_role("button", name="Open gripper").click()
+    page.get_by_text("Gripper: open (8.0 cm)").wait_for(timeout=10000)
+    page.get_by_role("button", name="Close gripper").click()
+    page.get_by_text("Gripper: closed, empty").wait_for(timeout=10000)
+    screenshot(page, "gripper-state")
+
+
 def _hold(page, name: str):
     button = page.get_by_role("button", name=name)
     box = button.bounding_box()

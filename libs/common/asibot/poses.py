@@ -56,6 +56,9 @@ def yaw_quaternion_wxyz(theta: float) -> list[float]:
 #: The five coordinates of a point as users read and type them: name and unit.
 POINT_AXES: tuple[tuple[str, str], ...] = (
     ("x", "m"), ("y", "m"), ("z", "m"), ("rot(y')", "deg"), ("rot(z'')", "deg"))
+#: What the two rotations mean to someone who has not read the kinematics conventions.
+POINT_AXIS_MEANINGS: dict[str, str] = {
+    "rot(y')": "tool tilt: 0 up, 90 level, 180 down", "rot(z'')": "tool turn about itself"}
 
 
 def user_point(pose: "Sequence[float] | np.ndarray") -> list[float]:

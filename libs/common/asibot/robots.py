@@ -33,13 +33,15 @@ class RobotSpec:
     gripper_max_opening: float
     solver: str
     has_base: bool
+    #: The simulated world that hosts this robot ("kitchen"); "" for a real robot.
+    world: str = ""
     extra: dict = field(default_factory=dict)
 
 
 _D = math.pi / 180.0
 
 
-def _asibot(robot_id: str, solver: str = "asibot") -> RobotSpec:
+def _asibot(robot_id: str, solver: str = "asibot", world: str = "") -> RobotSpec:
     lim = [360 * _D, 135 * _D, 135 * _D, 135 * _D, 360 * _D]
     return RobotSpec(
         robot_id=robot_id, arm="asibot", urdf_path=MODELS / "asibot.urdf",
@@ -47,14 +49,14 @@ def _asibot(robot_id: str, solver: str = "asibot") -> RobotSpec:
         lower=[-v for v in lim], upper=list(lim),
         max_velocity=[25 * _D] * 5, home=[0.0] * 5,
         base_link="base_link", tool_link="tool", gripper_max_opening=0.08,
-        solver=solver, has_base=False)
+        solver=solver, has_base=False, world=world)
 
 
 KATANA_JOINTS = ["katana_motor1_pan_joint", "katana_motor2_lift_joint", "katana_motor3_lift_joint",
                  "katana_motor4_lift_joint", "katana_motor5_wrist_roll_joint"]
 
 
-def _katana(robot_id: str) -> RobotSpec:
+def _katana(robot_id: str, world: str = "") -> RobotSpec:
     return RobotSpec(
         robot_id=robot_id, arm="katana", urdf_path=MODELS / "katana.urdf",
         joint_names=list(KATANA_JOINTS),
@@ -64,13 +66,13 @@ def _katana(robot_id: str) -> RobotSpec:
         # A folded, non-singular pose inside every limit.
         home=[0.0, 1.2, -1.0, -0.5, 0.0],
         base_link="katana_base_link", tool_link="katana_gripper_tool_frame",
-        gripper_max_opening=0.07, solver="pinocchio", has_base=True)
+        gripper_max_opening=0.07, solver="pinocchio", has_base=True, world=world)
 
 
 _CATALOG = {
-    "asibot-sim": _asibot("asibot-sim"),
+    "asibot-sim": _asibot("asibot-sim", world="kitchen"),
     "asibot": _asibot("asibot"),
-    "pioneer-sim": _katana("pioneer-sim"),
+    "pioneer-sim": _katana("pioneer-sim", world="apartment"),
     "pioneer": _katana("pioneer"),
 }
 

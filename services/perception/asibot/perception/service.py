@@ -211,7 +211,7 @@ class PerceptionService(Service):
                                     text=f"The {name} camera has sent no depth image for "
                                          f"{self.opt.freshness:g} s: obstacles it watches are not seen; {rest}."))
             for name in sorted(self._silent - silent):
-                self._event(m.Event(level="info", code="camera_back", text=f"The {name} camera works again."))
+                self._event(m.Event(level="info", code="camera_working", text=f"The {name} camera works again."))
             self._silent = silent
 
     # ------------------------------------------------------------------ RPC

@@ -15,9 +15,11 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from asibot import robots
+
 WORLDS_DIR = Path(str(resources.files("asibot.sim") / "worlds"))
-WORLDS = {"kitchen": "asibot-sim", "apartment": "pioneer-sim"}
-"""World name -> the robot id it hosts (one process per world)."""
+WORLDS = {robots.get(rid).world: rid for rid in robots.ids() if robots.get(rid).world}
+"""World name -> the robot id it hosts (one process per world), from the robot catalogue."""
 ARM_PREFIX = "arm/"
 ROBOT_GROUP = 2
 """Geom group of the robot's own base/station: ray sensors ignore it (see worlds/*.xml)."""

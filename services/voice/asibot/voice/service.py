@@ -58,6 +58,10 @@ NAME = "voice"
 DEFAULT_ROBOT = "asibot-sim"
 #: Timeout of a launch or stop call, and of the list of tasks, s.
 CALL_TIMEOUT, LIST_TIMEOUT = 3.0, 1.0
+#: After start, how long a Task Creator that does not answer yet is waited for without a
+#: warning (`asibot up` starts the web and voice together; the web takes a few seconds), s.
+STARTUP_GRACE_S = 30.0
+WAITING_FOR_TASKS = "Waiting for the Task Creator (the web service) to list the tasks."
 #: Utterances waiting to be acted on at most (each is a phrase someone said: a handful).
 MAX_WAITING = 16
 #: A recording sent to learn a word from, s at most (the word, with quiet around it).
@@ -153,6 +157,7 @@ class VoiceService(runtime.Service):
         self.recognizer = recognizer or Recognizer()
         self.grammar = self.recognizer.grammar
         self.tasks_problem = "The Task Creator was not asked yet."
+        self._started, self._never_listed = time.monotonic(), True
         self.robots = BusRobots(bus, robot)
         self.settings_file = settings_file or data_dir() / "voice" / "settings.json"
         confirm = _saved_confirm(self.settings_file, default=confirm)
@@ -244,18 +249,32 @@ class VoiceService(runtime.Service):
             with self._grammar_lock:
                 self._task_words = words
                 grammar = self._listen()
-        except (RpcError, GrammarError) as exc:
-            problem = f"{exc} Keeping the {len(self.grammar.phrases) - len(FIXED_WORDS)} words heard before."
-            if problem != self.tasks_problem:
-                log.warning("voice: cannot update the words: %s", problem)
-            self.tasks_problem = problem
+        except Unavailable as exc:
+            # At start-up the Task Creator may not be up yet (services start in any order):
+            # that is waiting, not a problem, until it has answered once or the grace is over.
+            if self._never_listed and time.monotonic() - self._started < STARTUP_GRACE_S:
+                if self.tasks_problem != WAITING_FOR_TASKS:
+                    log.info("voice: %s", WAITING_FOR_TASKS)
+                self.tasks_problem = WAITING_FOR_TASKS
+                return
+            self._cannot_update(exc)
             return
+        except (RpcError, GrammarError) as exc:
+            self._cannot_update(exc)
+            return
+        self._never_listed = False
         if grammar.key != self.grammar.key or self.tasks_problem:
             listed = ", ".join(repr(w) for w in grammar.phrases.values() if w not in FIXED_WORDS)
             log.info("voice: listening for %s and %s", listed or "no task words", ", ".join(FIXED_WORDS))
             for word, why in grammar.refused.items():
                 log.warning("voice: the word %r is left out: %s", word, why)
         self.grammar, self.tasks_problem = grammar, ""
+
+    def _cannot_update(self, exc: Exception) -> None:
+        problem = f"{exc} Keeping the {len(self.grammar.phrases) - len(FIXED_WORDS)} words heard before."
+        if problem != self.tasks_problem:
+            log.warning("voice: cannot update the words: %s", problem)
+        self.tasks_problem = problem
 
     def _listen(self) -> Grammar:
         """The tasks' words and the user's own pronunciations as the grammar (under _grammar_lock)."""

@@ -150,6 +150,17 @@ async def reset_fault(robot: RobotId, request: Request) -> dict:
     return await off_loop(web.motion.reset_fault, known(web, robot))
 
 
+@router.post("/robots/{robot}/reset_world", summary="simulation only: put the world back as it started")
+async def reset_world(robot: RobotId, request: Request) -> dict:
+    web = web_of(request)
+    known(web, robot)
+    status = web.runner.status()
+    if status["running"] and status["robot"] == robot:
+        raise RpcError("busy", f"{status['program']} is running on {robot}: stop it before putting the world back.")
+    await off_loop(web.motion.reset_world, robot)
+    return {"world": robots.get(robot).world}
+
+
 @router.get("/robots/{robot}/cameras", summary="the robot's cameras that are sending images")
 def cameras(robot: RobotId, request: Request) -> dict:
     return {"cameras": web_of(request).cameras.names(robot)}

@@ -27,6 +27,25 @@ from asibot.web.nav_view import map_json, nav_json
 EVENTS_KEPT = 20
 
 
+#: A gripper this share of its widest opening or more is open; this share or less, closed.
+OPEN_SHARE, CLOSED_SHARE = 0.9, 0.1
+
+
+def gripper_words(gripper: GripperState, widest: float | None) -> str:
+    """What the page says the gripper is: "open", "closed, holding something", "closed, empty"
+    or "partly open", with the opening in cm (the fingers may stop on a held object anywhere)."""
+    cm = f"{gripper.opening * 100:.1f} cm"
+    if gripper.holding:
+        return f"closed, holding something ({cm})"
+    if widest is None:
+        return f"open {cm}"
+    if gripper.opening >= OPEN_SHARE * widest:
+        return f"open ({cm})"
+    if gripper.opening <= CLOSED_SHARE * widest:
+        return "closed, empty"
+    return f"partly open ({cm})"
+
+
 @dataclass
 class RobotView:
     """The newest known state of one robot; None where nothing has come yet."""
@@ -58,7 +77,8 @@ class RobotView:
         arm = self.arm
         return {
             "id": self.robot_id,
-            "simulated": self.robot_id.endswith("-sim"),
+            "simulated": bool(spec and spec.world),
+            "world": spec.world if spec else "",
             "arm": spec.arm if spec else None,
             "has_base": bool(spec and spec.has_base),
             "driver": self.driver,
@@ -72,7 +92,8 @@ class RobotView:
                 "names": list(arm.names), "deg": [round(math.degrees(v), 3) for v in arm.positions]},
             "point": self.point(),
             "gripper": None if self.gripper is None else {
-                "opening": round(self.gripper.opening, 4), "holding": self.gripper.holding},
+                "opening": round(self.gripper.opening, 4), "holding": self.gripper.holding,
+                "says": gripper_words(self.gripper, spec.gripper_max_opening if spec else None)},
             "base": None if self.odom is None else {
                 "x": round(self.odom.x, 3), "y": round(self.odom.y, 3),
                 "theta_deg": round(math.degrees(self.odom.theta), 1)},

@@ -21,13 +21,13 @@ from typing import Any, Sequence
 from asibot.safety import estop
 from asibot import robots
 from asibot.bus import Bus
-from asibot.client import CartesianClient
+from asibot.client import CartesianClient, SimClient
 from asibot.errors import RpcError
 # The speed levels and a Cartesian step's speed are the kinematics `jog` verb's too.
 from asibot.jog import SPEED_LEVELS, STEP_LINEAR_SPEED, axes as jog_axes, speed_fraction
 from asibot.safety.estop import who
 from asibot.safety.identity import Identity
-from asibot.poses import POINT_AXES
+from asibot.poses import POINT_AXES, POINT_AXIS_MEANINGS
 from asibot.web.pointer import DeviceReading, PointerMapping
 
 #: Hold-to-move speeds at the top level: linear m/s, angular deg/s, joint deg/s.
@@ -36,6 +36,8 @@ HOLD_LINEAR, HOLD_ANGULAR, HOLD_JOINT = 0.10, 20.0, 20.0
 JOINT_STEP, LINEAR_STEP, ANGULAR_STEP = 5.0, 0.10, 15.0
 #: Longest RPC wait for a quick verb, s; the gripper takes up to 1.5 + 4 s to report (kinematics `act`).
 CALL_TIMEOUT, GRIP_TIMEOUT = 5.0, 8.0
+#: How long putting a simulated world back may take (the sim settles it for a moment), s.
+RESET_TIMEOUT = 10.0
 
 
 @dataclass(frozen=True)
@@ -53,7 +55,7 @@ class JogSettings:
     def as_json(self) -> dict[str, Any]:
         return {"speed_levels": list(self.speed_levels), "joint_step_deg": self.joint_step,
                 "linear_step_m": self.linear_step, "angular_step_deg": self.angular_step,
-                "point_axes": [{"name": n, "unit": u} for n, u in POINT_AXES]}
+                "point_axes": [{"name": n, "unit": u, "meaning": POINT_AXIS_MEANINGS.get(n, "")} for n, u in POINT_AXES]}
 
 
 class Motion:
@@ -177,3 +179,11 @@ class Motion:
 
     def reset_fault(self, robot: str) -> dict:
         return self._arm(robot).reset_fault()
+
+    def reset_world(self, robot: str) -> None:
+        """Put a simulated robot's world back as it started (objects, arm, base); a real robot
+        has no world to put back, and says so."""
+        world = robots.get(robot).world if robot in robots.ids() else ""
+        if not world:
+            raise RpcError("bad_request", f"{robot} is a real robot: there is no simulated world to put back.")
+        SimClient.on(self.bus, robot, RESET_TIMEOUT).reset_world()

@@ -49,6 +49,7 @@ export const paths = {
     gripper: (id) => at('robots', id, 'gripper'),
     release: (id) => at('robots', id, 'release'),
     resetFault: (id) => at('robots', id, 'reset_fault'),
+    resetWorld: (id) => at('robots', id, 'reset_world'),
     cameras: (id) => at('robots', id, 'cameras'),
     camera: (id, name) => at('robots', id, 'cameras', `${name}.mjpg`),
     capture: (id) => at('robots', id, 'capture'),

@@ -29,6 +29,14 @@ function card(robot) {
       onclick: () => attempt(() => api.post(paths.robot.resetFault(robot.id)), `${robot.id}: fault cleared.`),
     }, 'Reset fault'));
   }
+  if (robot.world) {
+    // Simulation only: after a test run the can lies on the floor; one button puts it back.
+    actions.push(el('button', {
+      type: 'button', 'aria-label': `Put the ${robot.world} of ${robot.id} back as it started`,
+      onclick: () => attempt(() => api.post(paths.robot.resetWorld(robot.id)),
+        `${robot.id}: the ${robot.world} is back as it started.`),
+    }, `Put the ${robot.world} back`));
+  }
   return el('div', { class: `robot-card${chosen ? ' chosen' : ''}`, dataset: { robot: robot.id } },
     el('span', {}, el('span', { class: 'name' }, robot.id),
       el('span', { class: 'kind' }, `${robot.simulated ? 'simulated' : 'real'} ${robot.arm || ''} ${robot.has_base ? '+ base' : ''}`)),

@@ -6,7 +6,7 @@
 // if the beats stop for any other reason the controller's 200 ms watchdog stops the arm).
 // With switch scanning (scanning.js) a hold cannot be held: a select starts the movement and the
 // next press of the switch stops it; the stops above still apply.
-import { api, chosenRobot, paths, sendLive, state } from './api.js';
+import { api, chosenRobot, onChange, paths, sendLive, state } from './api.js';
 import { attemptOn, el, fmt } from './ui.js';
 
 const BEAT_MS = 80;
@@ -110,7 +110,10 @@ export function jogGrid(space, rows, read) {
       holdable(b, beat(direction));
       return b;
     };
-    grid.append(el('span', { class: 'label' }, `${row.label}${row.unit ? ` (${row.unit})` : ''}`),
+    // A rotation says what it turns (the server's words): rot(y') alone means nothing to a carer.
+    const meaning = space === 'cartesian' ? state.config.jog.point_axes[row.axis]?.meaning : '';
+    grid.append(el('span', { class: 'label' }, `${row.label}${row.unit ? ` (${row.unit})` : ''}`,
+      meaning ? el('small', { class: 'meaning' }, meaning) : null),
       button(-1), value, button(1));
   }
   const update = (robot) => {
@@ -133,7 +136,21 @@ export function grip(close) {
     close ? (r) => (r.holding ? 'Gripper closed: holding.' : 'Gripper closed: empty.') : 'Gripper open.');
 }
 
+// The buttons and, beside them, what the gripper is now (the server's words: open, closed,
+// holding something), live.
 export function gripperButtons() {
+  const says = el('span', { class: 'gripper-state', role: 'status' });
+  const show = () => {
+    const gripper = chosenRobot()?.gripper;
+    says.textContent = gripper ? `Gripper: ${gripper.says}` : '';
+  };
+  let shown = false;
+  const off = onChange(() => {
+    if (says.isConnected) shown = true;
+    else if (shown) { off(); return; }        // its view was left: stop listening
+    show();
+  });
+  show();
   return [el('button', { type: 'button', onclick: () => grip(false) }, 'Open gripper'),
-    el('button', { type: 'button', onclick: () => grip(true) }, 'Close gripper')];
+    el('button', { type: 'button', onclick: () => grip(true) }, 'Close gripper'), says];
 }
