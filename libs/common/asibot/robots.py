@@ -34,6 +34,10 @@ class RobotSpec:
     solver: str
     has_base: bool
     extra: dict = field(default_factory=dict)
+    #: How far beyond the tool point the fingertips' centre is, along the tool's z, m.
+    finger_length: float = 0.0
+    #: How far below an object's top the fingertips close on it when they grasp it, m.
+    grip_depth: float = 0.03
 
 
 _D = math.pi / 180.0
@@ -47,7 +51,9 @@ def _asibot(robot_id: str, solver: str = "asibot") -> RobotSpec:
         lower=[-v for v in lim], upper=list(lim),
         max_velocity=[25 * _D] * 5, home=[0.0] * 5,
         base_link="base_link", tool_link="tool", gripper_max_opening=0.08,
-        solver=solver, has_base=False)
+        solver=solver, has_base=False,
+        # The worked pick (examples/give_me_the_red_can.py): fingers 4 cm, grip 3 cm below the top.
+        finger_length=0.04, grip_depth=0.03)
 
 
 KATANA_JOINTS = ["katana_motor1_pan_joint", "katana_motor2_lift_joint", "katana_motor3_lift_joint",
@@ -64,7 +70,9 @@ def _katana(robot_id: str) -> RobotSpec:
         # A folded, non-singular pose inside every limit.
         home=[0.0, 1.2, -1.0, -0.5, 0.0],
         base_link="katana_base_link", tool_link="katana_gripper_tool_frame",
-        gripper_max_opening=0.07, solver="pinocchio", has_base=True)
+        gripper_max_opening=0.07, solver="pinocchio", has_base=True,
+        # The tool frame lies between the fingertips already.
+        finger_length=0.0, grip_depth=0.03)
 
 
 _CATALOG = {
