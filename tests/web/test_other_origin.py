@@ -23,7 +23,8 @@ from .conftest import CHROMIUM, CHROMIUM_ARGS
 ROBOT = "asibot-sim"
 #: A body every route that takes one could accept (a step, a move, a program, a goal ...).
 BODY = {"space": "joint", "axis": 0, "direction": 1, "level": 5, "kind": "movj", "values": [60, 10, 10, 10, 0],
-        "joints": True, "name": "evil", "text": "open('/tmp/evil', 'w')\n", "close": True, "place": "fridge"}
+        "joints": True, "name": "evil", "text": "open('/tmp/evil', 'w')\n", "close": True, "place": "fridge",
+        "u": 160, "v": 120}
 
 ATTACK = """<!doctype html><meta charset="utf-8"><title>cat pictures</title>
 <script>
@@ -44,7 +45,9 @@ async function attack(target, routes, body) {
   form.append('file', new Blob(['PK'], {type: 'application/zip'}), 'seed.zip');
   try { await fetch(target + '/api/import', {method: 'POST', mode: 'no-cors', body: form}); } catch (e) {}
   const reads = {};
-  for (const path of ['/', '/api/robots', '/api/programs', '/api/export.zip', '/api/client-reference']) {
+  for (const path of ['/', '/api/robots', '/api/programs', '/api/export.zip', '/api/client-reference',
+                      '/api/robots/asibot-sim/depth-cameras', '/api/robots/asibot-sim/cameras/kitchen/cloud',
+                      '/api/robots/asibot-sim/cameras/kitchen/calibration']) {
     try { reads[path] = await (await fetch(target + path)).text(); } catch (e) { reads[path] = null; }
   }
   const socket = await new Promise((done) => {
@@ -79,9 +82,11 @@ def attacker(tmp_path):
 def changing_routes(kitchen) -> list[list[str]]:
     status, schema = kitchen.web("GET", "/openapi.json")
     found = []
-    for path, methods in schema["paths"].items():
-        path = path.replace("{robot}", ROBOT).replace("{name}", "evil").replace("{version}", "1").replace("{text}", "x")
+    for raw, methods in schema["paths"].items():
+        path = raw.replace("{robot}", ROBOT).replace("{name}", "evil").replace("{version}", "1").replace("{text}", "x")
         found += [[m.upper(), path] for m in methods if m not in ("get", "head")]
+        if "/cameras/{name}/" in raw:     # and on the camera that is there, so only the guard can refuse
+            found += [[m.upper(), path.replace("/cameras/evil/", "/cameras/kitchen/")] for m in methods if m not in ("get", "head")]
     return found
 
 
@@ -103,6 +108,11 @@ def test_a_page_on_another_origin_can_do_nothing(kitchen, attacker):
     from playwright.sync_api import sync_playwright
     routes = changing_routes(kitchen)
     assert len(routes) >= 35
+    # Touch to reach and the camera calibration are among them (api_world.py).
+    for route in (["POST", f"/api/robots/{ROBOT}/cameras/evil/touch"], ["POST", f"/api/robots/{ROBOT}/cameras/evil/calibration/marks"],
+                  ["POST", f"/api/robots/{ROBOT}/cameras/evil/calibration/solve"], ["DELETE", f"/api/robots/{ROBOT}/cameras/evil/calibration"],
+                  ["POST", "/api/points"]):
+        assert route in routes, route
     before = joints(kitchen)
     with sync_playwright() as p:
         browser = launch(p)
@@ -127,6 +137,9 @@ def test_a_page_on_another_origin_can_do_nothing(kitchen, attacker):
     status, programs = kitchen.web("GET", "/api/programs")
     assert "evil" not in programs["programs"]
     assert not (kitchen.data / "evil.py").exists()
+    assert not (kitchen.data / "cameras.json").exists()      # no calibration mark was paired
+    status, points = kitchen.web("GET", "/api/points")
+    assert "evil" not in [p["name"] for p in points["points"]]
 
 
 def test_a_rebound_dns_name_gets_nothing(kitchen):

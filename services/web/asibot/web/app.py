@@ -29,6 +29,7 @@ from asibot.web.api_files import ICON_LIMIT, IMPORT_LIMIT
 from asibot.web.api_files import router as files_router
 from asibot.web import api_base
 from asibot.web.api_robots import router as robots_router
+from asibot.web.api_world import router as world_router
 from asibot.web.cameras import Cameras
 from asibot.web.fleet import Fleet
 from asibot.web.live import Live
@@ -38,6 +39,7 @@ from asibot.web.runner import ProgramRunner
 from asibot.web.tasks_bus import TaskDesk
 from asibot.web.userdata import UserData
 from asibot.web.voice_relay import MicError, VoiceRelay
+from asibot.web.world import World
 
 STATIC = Path(str(resources.files("asibot.web") / "static"))
 #: The line of index.html after which the page's session token is written.
@@ -61,6 +63,7 @@ class Web:
     cameras: Cameras
     tasks: TaskDesk
     voice: VoiceRelay
+    world: World
     phones: lan.PhoneAccess = field(default_factory=lan.PhoneAccess)
     #: Who may call the server (its Host names), and the token its own pages carry (guard.py).
     callers: Callers = field(default_factory=Callers)
@@ -130,6 +133,7 @@ def create_app(web: Web) -> guard.PageGuard:
     errors.install(app)
     app.include_router(robots_router)
     app.include_router(files_router)
+    app.include_router(world_router)
     app.include_router(api_base.router)
 
     @app.get("/api/voice", summary="the voice service's settings (ask yes first before a task heard starts)")

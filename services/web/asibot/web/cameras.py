@@ -43,6 +43,18 @@ class Cameras:
         with self._cond:
             return sorted(n for (r, n), (_, t, _) in self._frames.items() if r == robot and now - t < SILENT_S)
 
+    def newest(self, robot: str, name: str) -> RgbImage | None:
+        """The camera's newest colour image (decoded from its message now), or None while it
+        sends none; the world's point cloud takes its colours from it."""
+        with self._cond:
+            kept = self._frames.get((robot, name))
+        if kept is None or time.monotonic() - kept[1] >= SILENT_S:
+            return None
+        try:
+            return messages.decode(RgbImage, kept[2])
+        except MessageError:
+            return None
+
     def frames(self, robot: str, name: str, stop: threading.Event) -> Iterator[bytes]:
         """JPEG frames of one camera as they come, until `stop` or SILENT_S of silence."""
         if name not in self.names(robot):

@@ -29,6 +29,7 @@ from asibot.web.runner import ProgramRunner, RunResult
 from asibot.web.tasks_bus import TaskDesk
 from asibot.web.userdata import UserData, default_root
 from asibot.web.voice_relay import VoiceRelay
+from asibot.web.world import World
 
 NAME = "web"
 #: More names the page is opened by (comma-separated: a reverse proxy's, a robot's DNS name).
@@ -81,8 +82,10 @@ class WebService(runtime.Service):
         names = [host, *local_http.names_from_env(HOSTS_ENV)]
         if lan:
             names += [*lan_access.lan_addresses(), socket.gethostname(), f"{socket.gethostname()}.local"]
+        cameras = Cameras(bus)
+        world = World(bus, cameras, data.folder, motion.inverse, self.fleet.point)
         self.web = Web(fleet=self.fleet, motion=motion, data=data, runner=runner, live=live,
-                       cameras=Cameras(bus), tasks=tasks, voice=VoiceRelay(bus, live.send),
+                       cameras=cameras, tasks=tasks, voice=VoiceRelay(bus, live.send), world=world,
                        callers=local_http.Callers(n for n in names if n not in ("0.0.0.0", "::")))
         self.app: guard.PageGuard | lan_access.TokenGate = create_app(self.web)
         tls: dict = {}

@@ -8,7 +8,7 @@ export class Refused extends Error {}
 const SESSION = document.querySelector('meta[name=asibot-session]')?.content || '';
 const SESSION_REFUSED = 4403;
 
-async function request(method, path, body) {
+async function request(method, path, body, binary = false) {
   const init = { method, headers: { 'X-Asibot-Session': SESSION } };
   if (body instanceof FormData) {
     init.body = body;
@@ -23,6 +23,7 @@ async function request(method, path, body) {
     throw new Refused('The server does not answer. Is `asibot up` still running?');
   }
   const type = reply.headers.get('Content-Type') || '';
+  if (binary && reply.ok) return reply.arrayBuffer();
   const data = type.includes('application/json') ? await reply.json() : await reply.text();
   if (!reply.ok) throw new Refused((data && data.message) || `The server answered ${reply.status}.`);
   return data;
@@ -52,6 +53,12 @@ export const paths = {
     resetWorld: (id) => at('robots', id, 'reset_world'),
     cameras: (id) => at('robots', id, 'cameras'),
     camera: (id, name) => at('robots', id, 'cameras', `${name}.mjpg`),
+    depthCameras: (id) => at('robots', id, 'depth-cameras'),
+    cloud: (id, name) => at('robots', id, 'cameras', name, 'cloud'),
+    touch: (id, name) => at('robots', id, 'cameras', name, 'touch'),
+    calibration: (id, name) => at('robots', id, 'cameras', name, 'calibration'),
+    calibrationMarks: (id, name) => at('robots', id, 'cameras', name, 'calibration', 'marks'),
+    calibrationSolve: (id, name) => at('robots', id, 'cameras', name, 'calibration', 'solve'),
     capture: (id) => at('robots', id, 'capture'),
     suggestedPointName: (id) => at('robots', id, 'suggested-point-name'),
     goToPoint: (id, point) => at('robots', id, 'points', point, 'go'),
@@ -94,6 +101,7 @@ export const paths = {
 
 export const api = {
   get: (path) => request('GET', path),
+  bytes: (path) => request('GET', path, undefined, true),   // an ArrayBuffer (the point cloud)
   post: (path, body = {}) => request('POST', path, body),
   put: (path, body) => request('PUT', path, body),
   del: (path) => request('DELETE', path),

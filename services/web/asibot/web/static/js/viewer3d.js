@@ -2,11 +2,19 @@
 // npm, served by our server), following the live joint state, plus a see-through "ghost" of a
 // target before it is sent. Under it: Pause (the picture stops following the arm, WCAG 2.2.2) and
 // buttons that turn and zoom the view, so dragging is never the only way (WCAG 2.5.7, 2.1.1).
+// "Show camera points" draws what the robot's depth cameras see, as coloured points in the
+// robot's frame (the server's cloud: services/web/asibot/web/world.py), refreshed a few times a
+// second while the view is on screen; the picture's data-points says how many are drawn.
 import * as THREE from '/static/vendor/three.js';
 import { api, paths } from './api.js';
 import { el } from './ui.js';
 
 const SOLID = new THREE.MeshStandardMaterial({ color: 0x4f7fb0, metalness: 0.2, roughness: 0.55 });
+// How often the camera points are fetched while shown, ms; the camera list is asked again this often.
+const CLOUD_MS = 333;
+const CAMERAS_MS = 5000;
+const POINTS = new THREE.PointsMaterial({ size: 0.03, vertexColors: true });
+const CLOUD_SHOWN = 'asibot.cloud';
 const GHOST = new THREE.MeshStandardMaterial({ color: 0xff9f1a, transparent: true, opacity: 0.35, depthWrite: false });
 
 function paint(robot, material) {
@@ -18,13 +26,14 @@ export class RobotViewer {
     this.picture = el('div', { class: 'viewer', role: 'img', 'aria-label': '3D view of the robot' });
     this.legend = el('p', { class: 'legend', role: 'status' });
     this.pauseButton = el('button', { type: 'button', 'aria-pressed': 'false', onclick: () => this.pause(!this.paused) }, 'Pause');
+    this.cloudButton = el('button', { type: 'button', 'aria-pressed': 'false', onclick: () => this.showCloud(!this.cloudShown) }, 'Show camera points');
     this.root = el('div', { class: 'viewer-box' }, this.picture,
       el('div', { class: 'row viewer-bar', role: 'group', 'aria-label': '3D view controls' },
         el('button', { type: 'button', onclick: () => this.turn(-1) }, 'Turn left'),
         el('button', { type: 'button', onclick: () => this.turn(1) }, 'Turn right'),
         el('button', { type: 'button', onclick: () => this.zoom(0.8) }, 'Closer'),
         el('button', { type: 'button', onclick: () => this.zoom(1.25) }, 'Farther'),
-        this.pauseButton),
+        this.pauseButton, this.cloudButton),
       this.legend);
     this.paused = false;
     this.latest = null;   // the joints that came while paused
@@ -45,6 +54,15 @@ export class RobotViewer {
     this.scene.add(sun);
     const grid = new THREE.GridHelper(2, 20, 0x8899aa, 0xc5ced6);
     this.scene.add(grid);
+    // The camera points, in the robot's frame: z-up like the URDF, turned as the robot is.
+    this.cloudFrame = new THREE.Group();
+    this.cloudFrame.rotation.x = -Math.PI / 2;
+    this.scene.add(this.cloudFrame);
+    this.clouds = new Map();     // camera name -> THREE.Points
+    this.depthCameras = { robot: null, names: [], at: 0 };
+    this.fetching = false;
+    this.showCloud(localStorage.getItem(CLOUD_SHOWN) !== 'off');
+    setInterval(() => this.refreshCloud(), CLOUD_MS);
     this.robotId = null;
     this.robot = null;
     this.ghost = null;
@@ -71,6 +89,7 @@ export class RobotViewer {
     if (robotId === this.robotId) return;
     this.robotId = robotId;
     for (const r of [this.robot, this.ghost]) if (r) this.scene.remove(r);
+    this.dropClouds();
     this.robot = this.ghost = null;
     if (!robotId) { this.dirty = true; return; }
     const model = await api.get(paths.robot.model(robotId));
@@ -88,12 +107,72 @@ export class RobotViewer {
     this.dirty = true;
   }
 
+  showCloud(on) {
+    this.cloudShown = on;
+    localStorage.setItem(CLOUD_SHOWN, on ? 'on' : 'off');
+    this.cloudButton.setAttribute('aria-pressed', String(on));
+    this.cloudFrame.visible = on;
+    this.dirty = true;
+    if (on) this.refreshCloud();
+  }
+
+  dropClouds() {
+    for (const points of this.clouds.values()) { this.cloudFrame.remove(points); points.geometry.dispose(); }
+    this.clouds.clear();
+    this.picture.dataset.points = '0';
+    this.dirty = true;
+  }
+
+  // Fetch every depth camera's points (one at a time: a slow answer is never overtaken).
+  async refreshCloud() {
+    if (!this.cloudShown || this.paused || this.fetching || !this.robotId || !this.picture.isConnected || document.hidden) return;
+    this.fetching = true;
+    const robot = this.robotId;
+    try {
+      const now = Date.now();
+      if (this.depthCameras.robot !== robot || now - this.depthCameras.at > CAMERAS_MS) {
+        const { cameras } = await api.get(paths.robot.depthCameras(robot));
+        this.depthCameras = { robot, names: cameras.filter((c) => c.pose_from).map((c) => c.name), at: now };
+      }
+      for (const name of [...this.clouds.keys()]) {
+        if (!this.depthCameras.names.includes(name)) { this.cloudFrame.remove(this.clouds.get(name)); this.clouds.delete(name); }
+      }
+      for (const name of this.depthCameras.names) {
+        const buffer = await api.bytes(paths.robot.cloud(robot, name));
+        if (robot !== this.robotId) return;
+        this.drawCloud(name, buffer);
+      }
+    } catch (e) {
+      this.depthCameras.at = 0;   // a camera stopped, or was never calibrated: ask again next time
+    } finally {
+      this.fetching = false;
+    }
+  }
+
+  // The server's cloud: uint32 N, N x 3 float32 x y z, N x 3 uint8 r g b (world.CLOUD_HEADER).
+  drawCloud(name, buffer) {
+    const n = new DataView(buffer).getUint32(0, true);
+    const xyz = new Float32Array(buffer, 4, n * 3);
+    const rgb = new Uint8Array(buffer, 4 + n * 12, n * 3);
+    let points = this.clouds.get(name);
+    if (points) points.geometry.dispose();
+    else { points = new THREE.Points(new THREE.BufferGeometry(), POINTS); this.cloudFrame.add(points); this.clouds.set(name, points); }
+    const geometry = new THREE.BufferGeometry();
+    geometry.setAttribute('position', new THREE.BufferAttribute(xyz.slice(), 3));
+    geometry.setAttribute('color', new THREE.BufferAttribute(rgb.slice(), 3, true));
+    points.geometry = geometry;
+    let total = 0;
+    for (const p of this.clouds.values()) total += p.geometry.getAttribute('position').count;
+    this.picture.dataset.points = String(total);
+    this.dirty = true;
+  }
+
   // Paused, the picture keeps the arm where it was; resuming shows where it is now.
   pause(on) {
     this.paused = on;
     this.pauseButton.setAttribute('aria-pressed', String(on));
     this.legend.textContent = on ? 'Paused: the picture shows the arm as it was. Touch Pause again to follow it.'
-      : 'Blue: the arm now. Orange: the target before you send it.';
+      : 'Blue: the arm now. Orange: the target before you send it. Dots: what the cameras see.';
     if (!on && this.latest) this.setJoints(...this.latest);
   }
 
@@ -124,9 +203,10 @@ export class RobotViewer {
 
   showGhost(names, degrees) {
     if (!this.ghost) return;
-    if (!names) { this.ghost.visible = false; this.dirty = true; return; }
+    if (!names) { this.ghost.visible = false; this.picture.dataset.ghost = 'hidden'; this.dirty = true; return; }
     names.forEach((name, i) => this.ghost.setJointValue(name, THREE.MathUtils.degToRad(degrees[i])));
     this.ghost.visible = true;
+    this.picture.dataset.ghost = degrees.map((d) => d.toFixed(1)).join(' ');   // what the ghost shows, for tests
     this.dirty = true;
   }
 }

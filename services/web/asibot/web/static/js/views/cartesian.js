@@ -1,11 +1,17 @@
 // Cartesian tab: jog the tool along x, y, z and its two rotations, move to (or by) a typed point
 // with movj or movl as on the seed, open and close the gripper, capture points. The typed point
 // is kept (keep.js) under `keep`: a tab switch or a reload does not reset it.
+//
+// Beside the jog controls, the robot's camera picture: touch what the arm should go to, and the
+// page offers "Go above it" and "Reach it", each shown first as the orange ghost in the 3D view
+// and moved only on "Move"; no coordinate is typed on that path (services/web/asibot/web/world.py).
 import { api, chosenRobot, paths, state } from '../api.js';
+import { calibrationPanel } from '../calibration.js';
+import { CameraPicture } from '../camera.js';
 import { gripperButtons, jogGrid, modeAndSpeed, stopButton } from '../jog.js';
 import { kept, setKept } from '../keep.js';
-import { pointsPanel } from '../points.js';
-import { attemptOn, el } from '../ui.js';
+import { loadPoints, pointsPanel } from '../points.js';
+import { attempt, attemptOn, el } from '../ui.js';
 import { viewer } from '../viewer3d.js';
 
 // The robot a panel commands, in its heading: " of asibot-sim".
@@ -42,7 +48,7 @@ export function cartesianControls(keep = 'cartesian') {
     if (r && r.point) { setKept(origin, 'absolute'); r.point.forEach((v, i) => { setKept(inputs[i], v.toFixed(i < 3 ? 3 : 1)); }); }
   };
   const robot = robotLabel();
-  const panel = el('section', { class: 'panel', 'aria-label': 'Cartesian jogging' },
+  const panel = el('section', { class: 'panel jog-panel', 'aria-label': 'Cartesian jogging' },
     el('h2', {}, 'Move the tool', robot.label), modeAndSpeed(), jog.grid,
     el('div', { class: 'row' }, stopButton(), gripperButtons()),
     el('h3', {}, 'Move to a point'), form,
@@ -59,14 +65,126 @@ export function cartesianControls(keep = 'cartesian') {
   return { panel, update: (r) => { jog.update(r); robot.update(r); } };
 }
 
+// What a touch offers: "Go above it" (movj: the arm swings there) and "Reach it" (movl: a straight
+// line down from above it into the grasp), each first as the ghost, then "Move".
+const OFFERS = [
+  { key: 'above', label: 'Go above it', kind: 'movj', moving: 'Moving above it.' },
+  { key: 'reach', label: 'Reach it', kind: 'movl', moving: 'Reaching it in a straight line.' },
+];
+
+function touchResult(touched) {
+  const box = el('div', { class: 'touch-result', role: 'region', 'aria-label': 'What you touched', dataset: { kind: touched.found.kind } });
+  const confirm = el('div', { class: 'touch-confirm' });
+  const chosen = { offer: null };
+  const unreachable = OFFERS.filter((o) => touched[o.key].unreachable)
+    .map((o) => el('p', { class: 'unreachable', role: 'status', dataset: { offer: o.key } }, `${o.label}: ${touched[o.key].unreachable}`));
+  const preview = (offer) => {
+    const candidate = touched[offer.key];
+    chosen.offer = offer;
+    if (!candidate.joints) {
+      viewer().showGhost(null);
+      confirm.replaceChildren(el('p', { class: 'unreachable', role: 'status' }, `${offer.label}: ${candidate.unreachable}`));
+      return;
+    }
+    viewer().showGhost(touched.names, candidate.joints);
+    confirm.replaceChildren(
+      el('p', { role: 'status' }, `${offer.label}: the orange ghost in the 3D view shows the arm there. Touch Move to go.`),
+      el('div', { class: 'row' },
+        el('button', {
+          type: 'button', class: 'primary', 'aria-label': `Move: ${offer.label}`,
+          onclick: () => attemptOn(state.chosen, (id) => api.post(paths.robot.move(id), { kind: offer.kind, values: candidate.point }), offer.moving),
+        }, 'Move'),
+        el('button', { type: 'button', onclick: () => { viewer().showGhost(null); confirm.replaceChildren(); } }, 'Cancel')));
+  };
+  const name = el('input', { type: 'text', 'aria-label': 'Name of the kept point', placeholder: 'suggested when empty' });
+  const keepIt = el('button', {
+    type: 'button',
+    onclick: () => attempt(async () => {
+      const body = { values: touched.reach.point };
+      if (name.value.trim()) body.name = name.value.trim();
+      const p = await api.post(paths.points, body);
+      name.value = '';
+      await loadPoints();
+      return p;
+    }, (p) => `Kept as ${p.name}: the grasp at what you touched.`),
+  }, 'Keep as a point');
+  box.append(
+    el('p', { class: 'touch-says' }, `You touched ${touched.says}.`),
+    el('div', { class: 'row' }, OFFERS.map((o) => el('button', { type: 'button', dataset: { offer: o.key }, onclick: () => preview(o) }, o.label))),
+    ...unreachable, confirm,
+    el('div', { class: 'row' }, keepIt, el('label', {}, 'Name ', name)));
+  return box;
+}
+
+export function cameraPanel(onEnlarge) {
+  const status = el('p', { class: 'muted camera-status', role: 'status' });
+  const result = el('div', { class: 'touch-box' });
+  let cameras = [];
+  let shownFor = null;
+  const camera = () => cameras.find((c) => c.picture) || null;
+  const calibration = calibrationPanel(() => camera() && camera().name, () => refresh(true));
+  const picture = new CameraPicture({
+    onEnlarge,
+    onSpot: (u, v) => {
+      const cam = camera();
+      if (!cam) return;
+      if (calibration.open) { calibration.spot(u, v); return; }
+      attemptOn(state.chosen, async (id) => {
+        result.replaceChildren(el('p', { class: 'muted', role: 'status' }, 'Looking at what you touched…'));
+        try {
+          result.replaceChildren(touchResult(await api.post(paths.robot.touch(id, cam.name), { u, v })));
+        } catch (e) {
+          result.replaceChildren();
+          throw e;
+        }
+      });
+    },
+  });
+  const calibrate = el('button', { type: 'button', onclick: () => { result.replaceChildren(); calibration.show(); } }, 'Calibrate the camera');
+  const heading = el('h2', {}, 'What the camera sees');
+  const panel = el('section', { class: 'panel camera-panel', 'aria-label': 'Camera' },
+    heading, status, picture.root, el('div', { class: 'row' }, calibrate), calibration.root, result);
+  let timer = null;
+  const refresh = async (again = false) => {
+    const robot = state.chosen;
+    if (!robot) { status.textContent = 'No robot commanded: press Command beside one in the Connection Manager first.'; picture.show(null, null); return; }
+    if (!again && shownFor === robot && camera()) return;
+    shownFor = robot;
+    try {
+      cameras = (await api.get(paths.robot.depthCameras(robot))).cameras;
+    } catch (e) {
+      cameras = [];
+    }
+    const cam = camera();
+    picture.show(robot, cam);
+    calibrate.hidden = !cam;
+    if (!cam) status.textContent = `${robot} has no depth camera with a picture sending now; it shows here when one sends.`;
+    else if (!cam.pose_from) status.textContent = `The ${cam.name} camera does not say where it stands: calibrate it before touching.`;
+    else status.textContent = `Touch what the arm should go to (the ${cam.name} camera${cam.pose_from === 'calibration' ? ', calibrated' : ''}).`;
+  };
+  // Until a camera sends, look again now and then (the simulation may start after the page).
+  timer = setInterval(() => { if (!camera() && !document.hidden) refresh(true); }, 3000);
+  return {
+    panel,
+    update: () => { if (state.chosen !== shownFor) { result.replaceChildren(); refresh(); } },
+    unmount: () => { clearInterval(timer); picture.stop(); },
+  };
+}
+
 export default {
   id: 'cartesian',
   title: 'Cartesian',
   mount(root) {
     const controls = cartesianControls();
     const points = pointsPanel();
-    root.replaceChildren(el('div', { class: 'columns' }, controls.panel,
-      el('div', {}, el('section', { class: 'panel', 'aria-label': '3D view' }, viewer().root), points.panel)));
-    return { update: controls.update, unmount: points.unmount };
+    const columns = el('div', { class: 'columns world-columns' });
+    const camera = cameraPanel((on) => columns.classList.toggle('camera-large', on));
+    columns.append(controls.panel, camera.panel,
+      el('div', { class: 'world-stack' }, el('section', { class: 'panel', 'aria-label': '3D view' }, viewer().root), points.panel));
+    root.replaceChildren(columns);
+    return {
+      update: (r) => { controls.update(r); camera.update(r); },
+      unmount: () => { points.unmount(); camera.unmount(); },
+    };
   },
 };

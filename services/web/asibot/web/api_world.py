@@ -1,0 +1,90 @@
+"""The world half of the API: what the robots' depth cameras see, touch to reach, and the
+camera calibration walk-through (asibot.web.world does the work; this module maps HTTP onto it).
+
+The point cloud is binary (world.CLOUD_HEADER: a count, float32 x y z, uint8 r g b), so the
+3D view reads it into typed arrays with no parsing, a few times a second; everything else is
+JSON. No route moves the arm: a touch answers with poses and their joints, which the page
+shows as the ghost, and the arm moves only when the person confirms it with an ordinary move.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Path, Request, Response
+from pydantic import Field
+
+from asibot.web.api_files import Name
+from asibot.web.models import Number, RobotId, Strict
+from asibot.web.routing import known, off_loop, web_of
+
+router = APIRouter(prefix="/api")
+
+CameraName = Annotated[str, Path(pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.\-]{0,63}$", description="a camera's name")]
+Pixel = Annotated[Number, Field(ge=0, le=10000, description="image pixels from the picture's top-left corner")]
+
+
+class Spot(Strict):
+    """A spot of a camera's picture, in its image pixels (u across, v down)."""
+    u: Pixel
+    v: Pixel
+
+
+class KeepPoint(Strict):
+    """A point to keep, as a touch proposed it: [x, y, z, rot(y'), rot(z'')] (m, deg)."""
+    values: Annotated[list[Number], Field(min_length=5, max_length=5)]
+    name: Name | None = Field(None, description="the point's name; suggested (above-can, point-3, ...) when left out")
+
+
+@router.get("/robots/{robot}/depth-cameras", summary="the robot's depth cameras: picture size and where their pose comes from")
+def depth_cameras(robot: RobotId, request: Request) -> dict:
+    return {"cameras": web_of(request).world.listing(robot)}
+
+
+@router.get("/robots/{robot}/cameras/{name}/cloud", response_class=Response,
+            summary="what a depth camera sees, as coloured points in the robot's frame (binary: uint32 N, "
+                    "N x 3 float32 x y z in m, N x 3 uint8 r g b)")
+async def cloud(robot: RobotId, name: CameraName, request: Request) -> Response:
+    count, body = await off_loop(web_of(request).world.cloud, robot, name)
+    return Response(body, media_type="application/octet-stream",
+                    headers={"Cache-Control": "no-store", "X-Point-Count": str(count)})
+
+
+@router.post("/robots/{robot}/cameras/{name}/touch",
+             summary="what is at a spot of the camera's picture, and the poses that go above it and reach it")
+async def touch(robot: RobotId, name: CameraName, body: Spot, request: Request) -> dict:
+    web = web_of(request)
+    return await off_loop(web.world.touch, known(web, robot), name, body.u, body.v)
+
+
+@router.post("/points", summary="keep a point a touch proposed (the arm does not move)")
+def keep_point(body: KeepPoint, request: Request) -> dict:
+    data = web_of(request).data
+    values = [float(v) for v in body.values]
+    point = data.add_point(body.name or data.suggest_point_name(values), values)
+    return {"name": point.name, "values": point.values}
+
+
+# --- calibration ---------------------------------------------------------------------------------
+@router.get("/robots/{robot}/cameras/{name}/calibration", summary="the marks touched so far and the solved pose")
+def calibration(robot: RobotId, name: CameraName, request: Request) -> dict:
+    return web_of(request).world.calibration(robot, name)
+
+
+@router.post("/robots/{robot}/cameras/{name}/calibration/marks",
+             summary="the tool is on the mark at this spot of the picture: pair them")
+async def add_mark(robot: RobotId, name: CameraName, body: Spot, request: Request) -> dict:
+    web = web_of(request)
+    return await off_loop(web.world.add_mark, known(web, robot), name, body.u, body.v)
+
+
+@router.post("/robots/{robot}/cameras/{name}/calibration/solve",
+             summary="solve the camera's pose from the marks (kept and used from then on), with its residual in mm")
+async def solve(robot: RobotId, name: CameraName, request: Request) -> dict:
+    return await off_loop(web_of(request).world.solve, robot, name)
+
+
+@router.delete("/robots/{robot}/cameras/{name}/calibration",
+               summary="forget the marks and the solved pose (the camera's own pose is used again)")
+async def clear(robot: RobotId, name: CameraName, request: Request) -> dict:
+    return await off_loop(web_of(request).world.clear, robot, name)

@@ -1,0 +1,259 @@
+"""The world as the robots' depth cameras see it, for the page: a coloured point cloud in the
+robot's frame for the 3D view, and "what is there" when a spot of a camera's picture is touched,
+with the tool poses that go above it and reach it, and the joints that do it (or the kinematics'
+sentence saying why they cannot).
+
+The server keeps the newest depth image and CameraInfo of every camera on the bus (undecoded,
+as web/cameras.py keeps the colour images, whose newest frame it borrows), and decodes them only
+when a page asks. Where a camera stands in the robot's frame is the installer's calibration
+when there is one (userdata/calibration.py), else the camera's own CameraInfo.pose (the
+simulation knows it); a camera with neither asks for a calibration first. Both go through the
+same code, so a real camera and the simulated one behave the same once calibrated.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+from asibot import depth, keys, messages, robots
+from asibot.bus import Bus
+from asibot.errors import MessageError, RpcError
+from asibot.messages import CameraInfo, DepthImage
+from asibot.web.cameras import SILENT_S, Cameras
+from asibot.web.userdata.calibration import Calibration, Calibrations
+from asibot.web.userdata.errors import UserDataError
+from asibot.web.userdata.folder import Folder
+
+#: "Go above it": the fingertips this far above the touched thing's top, m, tool pointing down.
+ABOVE_HEIGHT = 0.12
+#: "Reach it" on a surface (nothing stands there): the fingertips this far above it, m.
+SURFACE_CLEARANCE = 0.01
+#: The tool pointing straight down: rot(y') and rot(z''), deg (the worked pick's DOWN).
+TOOL_DOWN = (180.0, 0.0)
+#: The cloud's wire form: a little-endian uint32 count N, then N x 3 float32 x y z (m, the
+#: robot's frame), then N x 3 uint8 r g b. Typed arrays read it as it is; about 75 kB for 5000 points.
+CLOUD_HEADER = struct.Struct("<I")
+
+
+@dataclass
+class _Kept:
+    """The newest message of one stream of one camera, undecoded."""
+
+    seq: int
+    time: float
+    payload: bytes
+
+
+class World:
+    """The depth cameras of every robot, and what their pictures show in the robot's frame."""
+
+    def __init__(self, bus: Bus, cameras: Cameras, folder: Folder,
+                 inverse: Callable[[str, list[float]], list[float]],
+                 tool_point: Callable[[str], list[float] | None]) -> None:
+        self.cameras = cameras
+        self.calibrations = Calibrations(folder)
+        self.inverse = inverse
+        self.tool_point = tool_point
+        self._lock = threading.Lock()
+        self._kept: dict[tuple[str, str, str], _Kept] = {}
+        self._clouds: dict[tuple[str, str], tuple[tuple, int, bytes]] = {}   # (image, pose), N, body
+        for stream, key in (("depth", keys.camera_depth), ("info", keys.camera_info)):
+            bus.subscribe_raw(keys.every_robot(key, "*"), self._keeper(stream), maxsize=2)
+
+    def _keeper(self, stream: str) -> Callable[[str, bytes, int], None]:
+        def keep(key: str, payload: bytes, stamp_ns: int) -> None:
+            robot, name = keys.robot_of(key), keys.camera_of(key)
+            if robot and name:
+                with self._lock:
+                    old = self._kept.get((robot, name, stream))
+                    self._kept[(robot, name, stream)] = _Kept((old.seq if old else 0) + 1, time.monotonic(), payload)
+        return keep
+
+    # --- what is known of a camera --------------------------------------------------------
+    def names(self, robot: str) -> list[str]:
+        """Cameras of `robot` that sent a depth image and a CameraInfo in the last SILENT_S s."""
+        now = time.monotonic()
+        with self._lock:
+            depth_names = {n for (r, n, s), k in self._kept.items() if r == robot and s == "depth" and now - k.time < SILENT_S}
+            info_names = {n for (r, n, s), k in self._kept.items() if r == robot and s == "info" and now - k.time < SILENT_S}
+        return sorted(depth_names & info_names)
+
+    def listing(self, robot: str) -> list[dict[str, Any]]:
+        """The depth cameras of `robot` as the page needs them: picture size, whether it has a
+        colour picture to touch, and where its pose comes from ("calibration", "camera", None)."""
+        colour = set(self.cameras.names(robot))
+        out = []
+        for name in self.names(robot):
+            info = self._info(robot, name)
+            out.append({"name": name, "width": info.width, "height": info.height, "picture": name in colour,
+                        "pose_from": self._pose_source(robot, name, info)})
+        return out
+
+    def _newest(self, robot: str, name: str, stream: str) -> _Kept:
+        with self._lock:
+            kept = self._kept.get((robot, name, stream))
+        if kept is None or time.monotonic() - kept.time >= SILENT_S:
+            sending = ", ".join(self.names(robot)) or "none"
+            raise RpcError("unavailable", f"{robot} has no depth camera {name!r} sending images; its depth cameras: {sending}.")
+        return kept
+
+    def _info(self, robot: str, name: str) -> CameraInfo:
+        try:
+            return messages.decode(CameraInfo, self._newest(robot, name, "info").payload)
+        except MessageError as exc:
+            raise RpcError("unavailable", f"The {name} camera's description cannot be read: {exc}") from None
+
+    def _depth(self, robot: str, name: str) -> tuple[int, np.ndarray]:
+        kept = self._newest(robot, name, "depth")
+        try:
+            return kept.seq, np.asarray(messages.decode(DepthImage, kept.payload).depth, np.float32)
+        except MessageError as exc:
+            raise RpcError("unavailable", f"The {name} camera's depth image cannot be read: {exc}") from None
+
+    def _pose_source(self, robot: str, name: str, info: CameraInfo) -> str | None:
+        if self.calibrations.get(robot, name).pose is not None:
+            return "calibration"
+        try:
+            depth.pose_matrix(info.pose)
+            return "camera"
+        except depth.DepthError:
+            return None
+
+    def pose(self, robot: str, name: str, info: CameraInfo) -> np.ndarray:
+        """Where the camera stands in the robot's frame: the calibration's pose, else its own."""
+        solved = self.calibrations.get(robot, name).pose
+        if solved is not None:
+            return depth.pose_matrix(solved)
+        try:
+            return depth.pose_matrix(info.pose)
+        except depth.DepthError:
+            raise RpcError("unavailable", f"The {name} camera does not say where it stands: calibrate the camera first "
+                                          "(Calibrate the camera, beside its picture).") from None
+
+    # --- the point cloud -------------------------------------------------------------------
+    def cloud(self, robot: str, name: str) -> tuple[int, bytes]:
+        """(N, the cloud's wire form: see CLOUD_HEADER) of the newest depth image; made once
+        per image and pose, however many pages ask."""
+        info = self._info(robot, name)
+        pose = self.pose(robot, name, info)
+        seq, image = self._depth(robot, name)
+        stamp = (seq, tuple(np.round(pose, 9).ravel()))
+        with self._lock:
+            cached = self._clouds.get((robot, name))
+        if cached is not None and cached[0] == stamp:
+            return cached[1], cached[2]
+        picture = self.cameras.newest(robot, name)
+        rgb = None
+        if picture is not None:
+            try:
+                rgb = depth.decode_rgb(picture.jpeg)
+            except depth.DepthError:
+                rgb = None       # a broken frame: grey points this once
+        try:
+            xyz, colours = depth.cloud(image, rgb, info, pose)
+        except depth.DepthError as exc:
+            raise RpcError("unavailable", str(exc)) from None
+        body = CLOUD_HEADER.pack(len(xyz)) + xyz.astype("<f4").tobytes() + colours.tobytes()
+        with self._lock:
+            self._clouds[(robot, name)] = (stamp, len(xyz), body)
+        return len(xyz), body
+
+    # --- touch to reach --------------------------------------------------------------------
+    def touch(self, robot: str, name: str, u: float, v: float) -> dict[str, Any]:
+        """What is at pixel (u, v) of the camera's picture, and the two tool poses the page
+        offers: "above" (pointing down, the fingertips ABOVE_HEIGHT over its top) and "reach"
+        (the grasp: the fingertips the robot's grip depth below its top, at its centre), each
+        with its joints or the kinematics' sentence."""
+        spec = _spec(robot)
+        info = self._info(robot, name)
+        pose = self.pose(robot, name, info)
+        _, image = self._depth(robot, name)
+        try:
+            found = depth.object_at(image, info, pose, u, v)
+        except depth.DepthError as exc:
+            raise RpcError("bad_request", str(exc)) from None
+        fingers = spec.finger_length
+        if found.kind == "object":
+            x, y = found.centre[:2]
+            reach_z = found.top - spec.grip_depth + fingers
+        else:
+            x, y = found.surface[:2]
+            reach_z = found.top + SURFACE_CLEARANCE + fingers
+        above = [x, y, found.top + ABOVE_HEIGHT + fingers, *TOOL_DOWN]
+        reach = [x, y, reach_z, *TOOL_DOWN]
+        return {"found": found.as_json(), "says": describe(found),
+                "above": self._candidate(robot, above), "reach": self._candidate(robot, reach),
+                "names": spec.joint_names}
+
+    def _candidate(self, robot: str, point: list[float]) -> dict[str, Any]:
+        point = [round(float(c), 4) for c in point]
+        try:
+            return {"point": point, "joints": self.inverse(robot, point), "unreachable": None}
+        except RpcError as exc:
+            return {"point": point, "joints": None, "unreachable": exc.message}
+
+    # --- calibration ---------------------------------------------------------------------
+    def calibration(self, robot: str, name: str) -> dict[str, Any]:
+        return self.calibrations.get(robot, name).as_json()
+
+    def add_mark(self, robot: str, name: str, u: float, v: float) -> dict[str, Any]:
+        """Pair the mark at pixel (u, v) with where the fingertips are now (the arm's newest
+        point, as a capture reads it)."""
+        spec = _spec(robot)
+        here = self.tool_point(robot)
+        if here is None:
+            raise RpcError("unavailable", f"No position from {robot} yet: is its kinematics service running?")
+        info = self._info(robot, name)
+        _, image = self._depth(robot, name)
+        try:
+            depth.check_size(image, info)
+            su, sv = depth.depth_at(image, int(round(u)), int(round(v)))
+        except depth.DepthError as exc:
+            raise RpcError("bad_request", str(exc)) from None
+        seen = depth.deproject(info, su, sv, float(image[sv, su]))
+        return self._checked(lambda: self.calibrations.add_mark(robot, name, seen.tolist(), fingertips(here, spec)))
+
+    def solve(self, robot: str, name: str) -> dict[str, Any]:
+        return self._checked(lambda: self.calibrations.solve(robot, name))
+
+    def clear(self, robot: str, name: str) -> dict[str, Any]:
+        self.calibrations.clear(robot, name)
+        return Calibration().as_json()
+
+    @staticmethod
+    def _checked(action: Callable[[], Calibration]) -> dict[str, Any]:
+        try:
+            return action().as_json()
+        except UserDataError as exc:
+            raise RpcError("bad_request", str(exc)) from None
+
+
+def _spec(robot: str) -> robots.RobotSpec:
+    try:
+        return robots.get(robot)
+    except KeyError:
+        raise RpcError("bad_request", f"There is no robot {robot!r}; choose one of {', '.join(robots.ids())}.") from None
+
+
+def fingertips(point: list[float], spec: robots.RobotSpec) -> list[float]:
+    """Where the fingertips are for a tool point [x y z rot(y') rot(z'')] (m, deg): the robot's
+    finger length along the tool's z axis."""
+    from asibot.poses import point_rotation
+    rot = point_rotation(point[0], point[1], math.radians(point[3]), math.radians(point[4]))
+    return [float(c) for c in np.asarray(point[:3]) + rot[:, 2] * spec.finger_length]
+
+
+def describe(found: depth.Touched) -> str:
+    """What was touched, in the user's words: "an object 12 cm tall, 0.50 m away" (from the arm)."""
+    x, y = (found.centre if found.kind == "object" else found.surface)[:2]
+    away = math.hypot(x, y)
+    if found.kind == "object":
+        return f"an object {found.height * 100:.0f} cm tall, {away:.2f} m away"
+    return f"a flat surface {away:.2f} m away"
