@@ -23,7 +23,11 @@ from .conftest import CHROMIUM, CHROMIUM_ARGS
 ROBOT = "asibot-sim"
 #: A body every route that takes one could accept (a step, a move, a program, a goal ...).
 BODY = {"space": "joint", "axis": 0, "direction": 1, "level": 5, "kind": "movj", "values": [60, 10, 10, 10, 0],
-        "joints": True, "name": "evil", "text": "open('/tmp/evil', 'w')\n", "close": True, "place": "fridge"}
+        "joints": True, "name": "evil", "text": "open('/tmp/evil', 'w')\n", "close": True, "place": "fridge",
+        "steps": [], "template": "empty"}
+#: The routes of programs made of steps (api_steps.py), which openapi.json lists with the rest.
+STEPS_ROUTES = [["PUT", "/api/programs/evil/steps"], ["POST", "/api/programs/evil/steps/preview"],
+                ["POST", "/api/programs/evil/steps/template"], ["POST", "/api/step-programs"]]
 
 ATTACK = """<!doctype html><meta charset="utf-8"><title>cat pictures</title>
 <script>
@@ -44,7 +48,8 @@ async function attack(target, routes, body) {
   form.append('file', new Blob(['PK'], {type: 'application/zip'}), 'seed.zip');
   try { await fetch(target + '/api/import', {method: 'POST', mode: 'no-cors', body: form}); } catch (e) {}
   const reads = {};
-  for (const path of ['/', '/api/robots', '/api/programs', '/api/export.zip', '/api/client-reference']) {
+  for (const path of ['/', '/api/robots', '/api/programs', '/api/export.zip', '/api/client-reference',
+                      '/api/programs/evil/steps']) {
     try { reads[path] = await (await fetch(target + path)).text(); } catch (e) { reads[path] = null; }
   }
   const socket = await new Promise((done) => {
@@ -103,6 +108,7 @@ def test_a_page_on_another_origin_can_do_nothing(kitchen, attacker):
     from playwright.sync_api import sync_playwright
     routes = changing_routes(kitchen)
     assert len(routes) >= 35
+    assert all(r in routes for r in STEPS_ROUTES), routes
     before = joints(kitchen)
     with sync_playwright() as p:
         browser = launch(p)
@@ -127,6 +133,7 @@ def test_a_page_on_another_origin_can_do_nothing(kitchen, attacker):
     status, programs = kitchen.web("GET", "/api/programs")
     assert "evil" not in programs["programs"]
     assert not (kitchen.data / "evil.py").exists()
+    assert not (kitchen.data / "evil.steps.json").exists()
 
 
 def test_a_rebound_dns_name_gets_nothing(kitchen):
