@@ -24,7 +24,10 @@ ROBOT = "asibot-sim"
 #: A body every route that takes one could accept (a step, a move, a program, a goal ...).
 BODY = {"space": "joint", "axis": 0, "direction": 1, "level": 5, "kind": "movj", "values": [60, 10, 10, 10, 0],
         "joints": True, "name": "evil", "text": "open('/tmp/evil', 'w')\n", "close": True, "place": "fridge",
-        "u": 160, "v": 120}
+        "u": 160, "v": 120, "steps": [], "template": "empty"}
+#: The routes of programs made of steps (api_steps.py), which openapi.json lists with the rest.
+STEPS_ROUTES = [["PUT", "/api/programs/evil/steps"], ["POST", "/api/programs/evil/steps/preview"],
+                ["POST", "/api/programs/evil/steps/template"], ["POST", "/api/step-programs"]]
 
 ATTACK = """<!doctype html><meta charset="utf-8"><title>cat pictures</title>
 <script>
@@ -47,7 +50,8 @@ async function attack(target, routes, body) {
   const reads = {};
   for (const path of ['/', '/api/robots', '/api/programs', '/api/export.zip', '/api/client-reference',
                       '/api/robots/asibot-sim/depth-cameras', '/api/robots/asibot-sim/cameras/kitchen/cloud',
-                      '/api/robots/asibot-sim/cameras/kitchen/calibration']) {
+                      '/api/robots/asibot-sim/cameras/kitchen/calibration',
+                      '/api/programs/evil/steps']) {
     try { reads[path] = await (await fetch(target + path)).text(); } catch (e) { reads[path] = null; }
   }
   const socket = await new Promise((done) => {
@@ -113,6 +117,7 @@ def test_a_page_on_another_origin_can_do_nothing(kitchen, attacker):
                   ["POST", f"/api/robots/{ROBOT}/cameras/evil/calibration/solve"], ["DELETE", f"/api/robots/{ROBOT}/cameras/evil/calibration"],
                   ["POST", "/api/points"]):
         assert route in routes, route
+    assert all(r in routes for r in STEPS_ROUTES), routes
     before = joints(kitchen)
     with sync_playwright() as p:
         browser = launch(p)
@@ -140,6 +145,7 @@ def test_a_page_on_another_origin_can_do_nothing(kitchen, attacker):
     assert not (kitchen.data / "cameras.json").exists()      # no calibration mark was paired
     status, points = kitchen.web("GET", "/api/points")
     assert "evil" not in [p["name"] for p in points["points"]]
+    assert not (kitchen.data / "evil.steps.json").exists()
 
 
 def test_a_rebound_dns_name_gets_nothing(kitchen):

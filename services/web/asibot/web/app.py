@@ -28,6 +28,7 @@ from asibot.web import errors, guard, lan, page_messages
 from asibot.web.api_files import ICON_LIMIT, IMPORT_LIMIT
 from asibot.web.api_files import router as files_router
 from asibot.web import api_base
+from asibot.web.api_steps import router as steps_router
 from asibot.web.api_robots import router as robots_router
 from asibot.web.api_world import router as world_router
 from asibot.web.cameras import Cameras
@@ -134,6 +135,7 @@ def create_app(web: Web) -> guard.PageGuard:
     app.include_router(robots_router)
     app.include_router(files_router)
     app.include_router(world_router)
+    app.include_router(steps_router)
     app.include_router(api_base.router)
 
     @app.get("/api/voice", summary="the voice service's settings (ask yes first before a task heard starts)")

@@ -6,6 +6,7 @@ ASIBOT user's folder works as it is:
     points.ini          one point a line: <name> <x> <y> <z> <rot(y')> <rot(z'')> (m, deg)
     words.ini           one word or phrase a line
     <program>.py        the user's programs
+    <program>.steps.json  the steps of a program made without Python (steps.py), beside it
     <task>.task         3 lines: program (no .py), words (several joined by ";"), icon file name
     icons/              uploaded icons (PNG, JPEG, GIF, WebP)
     .versions/<prog>/   previous versions of each program, so a bad save can be undone
@@ -37,11 +38,12 @@ from asibot.web.userdata.points import Point, Points, check_point_name, check_va
 from asibot.web.userdata.programs import (MAX_PROGRAM_BYTES, VERSIONS_KEPT, Problem, Programs, Version,
                                           check_program, check_program_name, check_program_text)
 from asibot.web.userdata.seed import SEED_ICONS, ImportReport, Skipped
+from asibot.web.userdata.steps import Made, ProgramSteps, Saved
 from asibot.web.userdata.tasks import Task, Tasks, check_task_name, check_task_words
 from asibot.web.userdata.words import MAX_WORD, Words, check_word
 
 __all__ = ["AlreadyExists", "NotFound", "UserDataError", "UserData", "default_root",
-           "Point", "Version", "Problem", "Task", "Icon", "Skipped", "ImportReport",
+           "Point", "Version", "Problem", "Task", "Icon", "Skipped", "ImportReport", "Made", "Saved",
            "check_point_name", "check_values", "check_program_name", "check_program_text", "check_program",
            "check_task_name", "check_icon_name", "check_word",
            "SHIPPED_ICONS", "SEED_ICONS", "MAX_NAME", "MAX_WORD", "MAX_PROGRAM_BYTES", "MAX_ICON_BYTES",
@@ -77,6 +79,8 @@ class UserData:
         self.program_files = Programs(self.folder)
         self.task_files = Tasks(self.folder)
         self.icon_files = Icons(self.folder)
+        #: The steps of programs made without Python; its methods take the folder's lock.
+        self.steps = ProgramSteps(self.folder, self.point_file, self.program_files)
 
     # ------------------------------------------------------------------------------ points
 
@@ -141,12 +145,14 @@ class UserData:
         """Rename a program with its versions; tasks that run it follow it."""
         self.program_files.rename(old, new)
         if old != new:
+            self.steps.rename(old, new)
             self.task_files.follow_program(old, new)
 
     @_locked
     def delete_program(self, name: str) -> None:
         """Move a program (and its versions) to the trash; refused while a task runs it."""
         self.program_files.delete(name, [t.name for t in self.task_files.all() if t.program == name])
+        self.steps.delete(name)
 
     def check_program(self, text: str) -> list[Problem]:
         """See the module function `check_program`."""

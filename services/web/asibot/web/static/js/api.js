@@ -71,6 +71,12 @@ export const paths = {
   renameProgram: (name) => at('programs', name, 'rename'),
   runProgram: (name) => at('programs', name, 'run'),
   restoreVersion: (name, version) => at('programs', name, 'versions', version, 'restore'),
+  programSteps: {
+    steps: (name) => at('programs', name, 'steps'),
+    preview: (name) => at('programs', name, 'steps', 'preview'),
+    template: (name) => at('programs', name, 'steps', 'template'),
+  },
+  stepPrograms: at('step-programs'),
   check: at('check'),
   clientReference: at('client-reference'),
   run: at('run'),

@@ -6,11 +6,15 @@
 // (the traceback under Details); beside the editor, the clients' reference (pyhelp.js).
 // Unsaved text is a draft, kept per program in this browser until it is saved or discarded: a
 // tab switch, another program opened or a reload loses nothing.
+// Beside the Python editor, the steps editor (steps.js): a "Steps" / "Python" switch shows one or
+// the other; a program made of steps opens in Steps, and one can be made straight from the
+// "Pick it up" or "Put it down" template, or with no steps yet.
 import { EditorView, basicSetup, python, keymap } from '/static/vendor/codemirror.js';
 import { api, onChange, onMessage, paths, state } from '../api.js';
 import { kept, setKept } from '../keep.js';
 import { loadPoints, onPointsChange } from '../points.js';
 import { completeClients, referencePanel } from '../pyhelp.js';
+import { pointChooser, stepsEditor } from '../steps.js';
 import { about, attempt, attemptOn, confirmable, el, notify } from '../ui.js';
 
 let current = sessionStorage.getItem('asibot.program');  // the program open in the editor
@@ -132,10 +136,19 @@ export default {
     // A failed run of the open program: a button that shows its line.
     const output = outputPanel({
       lineButton: (last) => (last.line && last.program === current ? el('button', {
-        type: 'button', onclick: () => goToLine(last.line, 1),
+        type: 'button', onclick: () => { setMode('python'); goToLine(last.line, 1); },
       }, `Show line ${last.line}`) : null),
     });
     let saved = '';      // the open program's text on the server
+    let mode = 'python'; // the open program shown as 'steps' or 'python'
+    const steps = stepsEditor({ onSaved: (name) => open(name), showPython: () => setMode('python') });
+    const stepsPart = el('div', { hidden: true }, steps.node);
+    const modeButtons = ['steps', 'python'].map((m) => el('button', {
+      type: 'button', 'aria-pressed': 'false', dataset: { mode: m }, onclick: () => setMode(m),
+    }, m === 'steps' ? 'Steps' : 'Python'));
+    // A program made of steps, shown as Python: whether the Python is still the one they made.
+    const syncNote = el('p', { class: 'steps-status out-of-sync', role: 'status', hidden: true });
+    const fromSteps = el('div', { class: 'steps-chooser', role: 'group', 'aria-label': 'Choose a point', hidden: true });
     let base = null;     // the saved text its draft began from (null: no draft)
 
     const text = () => editor.state.doc.toString();
@@ -207,6 +220,7 @@ export default {
     // Open `name`: its draft if it has one, else the saved text.
     const open = (name) => attempt(async () => {
       const p = await api.get(paths.program(name));
+      const s = await steps.open(name);
       current = name;
       sessionStorage.setItem('asibot.program', name);
       title.textContent = `${name}.py`;
@@ -214,6 +228,10 @@ export default {
       base = draft ? draft.base : null;
       setText(draft && draft.text !== p.text ? draft.text : p.text, p.text);
       reference.follow(text());
+      setMode(sessionStorage.getItem(`asibot.program.mode.${name}`) || (s.steps !== null ? 'steps' : 'python'));
+      syncNote.hidden = s.steps === null || s.in_sync;
+      syncNote.textContent = 'This Python was edited after the program\'s steps made it: its steps no longer match it. '
+        + 'Both are kept; the Steps view has the steps, and saving them there makes the Python from them again.';
       output.redraw();
       showProblems([]);
       versions.replaceChildren(...p.versions.slice(0, 8).map((v) => confirmable(`Restore ${clock(v.saved)}`, {
@@ -241,6 +259,25 @@ export default {
       setText(saved, saved);
       notify(`${current}.py: back to the saved text.`, 'info');
     });
+    // Show the open program as steps or as Python (remembered per program in this browser tab).
+    function setMode(m) {
+      mode = m;
+      if (current) sessionStorage.setItem(`asibot.program.mode.${current}`, m);
+      stepsPart.hidden = m !== 'steps';
+      pythonPart.hidden = m !== 'python';
+      for (const b of modeButtons) b.setAttribute('aria-pressed', String(b.dataset.mode === m));
+    }
+    // A new program of steps: none yet, or a template's at a point; without a typed name it is
+    // named after the template and the point ("pick_up_grasp-can").
+    const createFromSteps = (template, point = null) => attempt(async () => {
+      const typed = newName.value.trim();
+      const name = typed || (point ? `${template === 'pick_it_up' ? 'pick_up' : 'put_down'}_${point}`.replace(/[^A-Za-z0-9_-]/g, '_') : '');
+      await api.post(paths.stepPrograms, { name, template, point });
+      setKept(newName, '');
+      sessionStorage.setItem(`asibot.program.mode.${name}`, 'steps');
+      await open(name);
+      return name;
+    }, (name) => `New program ${name}, made of steps.`);
     const create = () => attempt(async () => {
       const name = newName.value.trim();
       await api.post(paths.programs, { name });
@@ -272,6 +309,8 @@ export default {
       drafts.drop(current);
       current = null; sessionStorage.removeItem('asibot.program');
       title.textContent = 'No program open'; setText('', '');
+      steps.close();
+      syncNote.hidden = true;
       versions.replaceChildren();
       showDraftState();
       await refreshList();
@@ -302,7 +341,10 @@ export default {
       }, p.name)) : [el('span', { class: 'muted' }, 'No points yet: capture some on the Joint or Cartesian page.')]));
     });
     const run = () => current && attemptOn(state.chosen, async (robot) => {
-      if (unsaved()) await save();
+      if (mode === 'steps' && steps.dirty()) {
+        if (!steps.inSync()) throw new Error('Save the steps first: they replace the Python of the program, so Save steps asks you to confirm.');
+        if (!(await steps.save())) throw new Error('The steps were not saved, so the program did not run.');
+      } else if (mode === 'python' && unsaved()) await save();
       output.clear();
       const status = await api.post(paths.runProgram(current), { robot, minutes: Number(minutes.value) });
       output.show(status);
@@ -311,18 +353,33 @@ export default {
     // A program that waits for ever is stopped at its time limit (the server's sandbox).
     const minutes = kept('program.minutes', el('input', { type: 'number', id: 'run-minutes', min: '1', max: '240', value: '10', class: 'narrow' }));
 
+    const pythonPart = pythonPartOf();
     root.replaceChildren(el('div', { class: 'columns program-columns' },
       el('div', {},
         el('section', { class: 'panel', 'aria-label': 'Programs' },
           el('h2', {}, 'Programs'), list,
-          el('div', { class: 'row' }, newName, el('button', { type: 'button', class: 'primary', onclick: create }, 'New program'))),
+          el('div', { class: 'row' }, newName, el('button', { type: 'button', class: 'primary', onclick: create }, 'New program')),
+          el('div', { class: 'row' },
+            el('button', { type: 'button', onclick: () => createFromSteps('empty') }, 'New from steps'),
+            el('button', { type: 'button', onclick: () => pointChooser(fromSteps, 'Pick it up at which point?', (p) => createFromSteps('pick_it_up', p)) }, 'New: Pick it up…'),
+            el('button', { type: 'button', onclick: () => pointChooser(fromSteps, 'Put it down at which point?', (p) => createFromSteps('put_it_down', p)) }, 'New: Put it down…')),
+          fromSteps),
         el('section', { class: 'panel', 'aria-label': 'Run' },
           el('h2', {}, 'Run'),
           el('div', { class: 'row' }, el('button', { type: 'button', class: 'primary big', onclick: run }, 'Run'), stopProgramButton(),
             el('label', { for: 'run-minutes' }, 'Time limit, minutes ', minutes)),
           output.node)),
       el('section', { class: 'panel', 'aria-label': 'Editor' },
-        title, draftState,
+        title,
+        el('div', { class: 'row' },
+          el('div', { class: 'row mode-switch', role: 'group', 'aria-label': 'Edit the program as' }, ...modeButtons),
+          el('button', { type: 'button', onclick: rename }, 'Rename'),
+          confirmable('Delete', {}, del)),
+        stepsPart,
+        pythonPart)));
+    // The Python editor and what goes with it (hidden while the program is shown as steps).
+    function pythonPartOf() {
+      return el('div', {}, syncNote, draftState,
         el('div', { class: 'row' },
           el('button', { type: 'button', class: 'primary', onclick: save, 'aria-keyshortcuts': 'Control+S' }, 'Save'),
           el('button', {
@@ -332,9 +389,7 @@ export default {
               return r;
             }, (r) => (r.problems.length ? 'Syntax error: see below.' : 'No syntax errors.')),
           }, 'Check syntax'),
-          el('button', { type: 'button', onclick: rename }, 'Rename'),
-          discard,
-          confirmable('Delete', {}, del)),
+          discard),
         el('h3', {}, 'Insert at the cursor (a gripper call, or a point and a movl to it)'),
         el('div', { class: 'row inserts' }, gripperButtons, pointButtons),
         el('div', { class: 'editor-beside' },
@@ -343,11 +398,12 @@ export default {
             el('p', { class: 'muted' }, 'Esc in the editor: the first only closes its list of completions or its search box (with nothing open, it only warns); the second is the emergency stop.'),
             problems,
             el('h3', {}, 'Previous versions'), versions),
-          reference.node))));
+          reference.node));
+    }
     showDraftState();
     refreshList().catch((e) => notify(e.message));
     loadPoints().catch((e) => notify(e.message));
     if (current) open(current);
-    return { unmount: () => { offPoints(); output.unmount(); editor.destroy(); } };
+    return { unmount: () => { offPoints(); steps.unmount(); output.unmount(); editor.destroy(); } };
   },
 };

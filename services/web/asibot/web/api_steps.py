@@ -1,0 +1,110 @@
+"""Programs without Python, over HTTP: a program's steps (read, save, preview), the templates'
+steps, and a new program made straight from a template.
+
+Saving steps writes the program's Python (asibot.web.steps makes it; userdata/steps.py keeps
+both and knows whether they still agree). A template's steps are answered, not saved: the page
+holds the steps being edited, so they go where the person is adding steps (at the end, or
+inside a Repeat) and are saved with the rest, and nothing is written behind their back (an
+edited Python is replaced only once they confirm).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from fastapi import APIRouter, Request
+from pydantic import Field, StrictBool, StrictStr
+
+from asibot.web import steps as steplib
+from asibot.web.models import Strict
+from asibot.web.routing import web_of
+from asibot.web.userdata import NotFound, UserData, UserDataError
+from asibot.web.userdata.names import quote
+
+router = APIRouter(prefix="/api")
+
+Name = Annotated[StrictStr, Field(min_length=1, max_length=200)]
+StepList = Annotated[list[steplib.Step], Field(max_length=steplib.MAX_STEPS)]
+
+
+class StepsBody(Strict):
+    steps: StepList
+    replace_python: StrictBool = Field(False, description="the person confirmed that the steps replace Python "
+                                                          "edited since (or a program written in Python)")
+
+
+class Preview(Strict):
+    steps: StepList
+
+
+class TemplateBody(Strict):
+    template: steplib.Template
+    point: Name
+
+
+class NewFromSteps(Strict):
+    name: Name
+    template: Literal["empty", "pick_it_up", "put_it_down"] = Field(
+        description="no steps yet, or a template's steps at `point`")
+    point: Name | None = None
+
+
+def _template(data: UserData, template: str, point: str | None) -> list[steplib.Step]:
+    if template == "empty":
+        return []
+    if point is None:
+        raise UserDataError("Choose the point the template is made from.")
+    data.point(point)   # NotFound with the point's name
+    return steplib.TEMPLATES[template](point)
+
+
+def _answer(data: UserData, name: str, steps: list[steplib.Step], **more: object) -> dict:
+    return {"name": name, "steps": steplib.dump(steps),
+            "described": steplib.describe(steps, data.steps.point_values()), **more}
+
+
+@router.get("/programs/{name}/steps", summary="a program's steps, their sentences, and whether its Python still "
+                                              "is the one they made (in_sync); steps null: written in Python")
+def read_steps(name: str, request: Request) -> dict:
+    data = web_of(request).data
+    saved = data.steps.read(name)
+    if saved is None:
+        return {"name": name, "steps": None, "described": None, "in_sync": False, "points_changed": False}
+    try:
+        described = steplib.describe(saved.steps, data.steps.point_values())
+    except UserDataError:
+        described = None    # a point they use is gone: the page shows the steps plainly, a save says which
+    return {"name": name, "steps": steplib.dump(saved.steps), "described": described, "in_sync": saved.in_sync,
+            "points_changed": data.steps.points_changed(name, saved)}
+
+
+@router.put("/programs/{name}/steps", summary="save a program's steps and write its Python from them "
+                                              "(the Python it replaces is kept as a version)")
+def save_steps(name: str, body: StepsBody, request: Request) -> dict:
+    data = web_of(request).data
+    made = data.steps.save(name, body.steps, replace=body.replace_python)
+    return _answer(data, name, made.steps, text=made.text, in_sync=True, points_changed=False)
+
+
+@router.post("/programs/{name}/steps/preview", summary="the Python and the sentences steps would make "
+                                                       "(nothing is saved)")
+def preview_steps(name: str, body: Preview, request: Request) -> dict:
+    data = web_of(request).data
+    return _answer(data, name, body.steps, text=data.steps.preview(name, body.steps))
+
+
+@router.post("/programs/{name}/steps/template", summary="the steps of a template at a point, for the page to add "
+                                                        "to the program's steps (nothing is saved)")
+def template_steps(name: str, body: TemplateBody, request: Request) -> dict:
+    data = web_of(request).data
+    if name not in data.programs():
+        raise NotFound(f"There is no program named {quote(name)}.")
+    return _answer(data, name, _template(data, body.template, body.point))
+
+
+@router.post("/step-programs", summary="a new program made of steps: none yet, or a template's at a point")
+def new_from_steps(body: NewFromSteps, request: Request) -> dict:
+    data = web_of(request).data
+    steps = _template(data, body.template, body.point)
+    made = data.steps.save(body.name, steps, new=True)
+    return _answer(data, body.name, made.steps, text=made.text, in_sync=True, points_changed=False)

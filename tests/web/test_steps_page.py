@@ -1,0 +1,108 @@
+"""Programs without Python (issue 27, point 3) in Debian's chromium against the kitchen: a
+program made from the "Pick it up" template at one captured point with no code typed, a step
+added with the keyboard, saved, shown as Python, run, and the red can lifted (the sim's truth);
+then the program edited as Python says its steps are no longer in sync and keeps both."""
+
+from __future__ import annotations
+
+import pytest
+
+from asibot.client import SimClient
+from asibot.testing import wait_until
+from asibot.web import steps
+
+from .conftest import fresh_page, screenshot
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(400)]
+
+ROBOT = "asibot-sim"
+#: The grip pose at the red can, as a capture there would store it.
+AT_THE_CAN = [0.0, 0.5, 0.09, 180.0, 0.0]
+
+
+def http(stack, method: str, path: str, body: dict | None = None) -> dict:
+    status, answer = stack.web(method, path, body)
+    assert status < 400, f"{method} {path}: {status} {answer}"
+    return answer or {}
+
+
+@pytest.fixture
+def page(browser, kitchen):
+    with fresh_page(browser, kitchen.web_url, (ROBOT,), (1280, 800)) as page:
+        yield page
+
+
+def test_pick_it_up_from_the_template_with_no_code_typed(page, kitchen):
+    from playwright.sync_api import expect
+    # The point at the can, as a capture there stores it (points.ini, the seed's format).
+    kitchen.data.mkdir(exist_ok=True)
+    (kitchen.data / "points.ini").write_text(f"grasp-can {' '.join(repr(v) for v in AT_THE_CAN)}\n")
+    sim = SimClient.on(kitchen.bus, ROBOT)
+    sim.reset_world()
+    can = sim.object_pose("red_can")
+
+    page.evaluate("() => { location.hash = 'program'; }")
+    page.get_by_label("New program name").fill("give_me_the_can")
+    page.get_by_role("button", name="New: Pick it up…").click()
+    page.get_by_role("button", name="Choose point grasp-can").click()
+    page.get_by_role("heading", name="give_me_the_can.py").wait_for(timeout=10000)
+    expect(page.get_by_role("button", name="Steps", exact=True)).to_have_attribute("aria-pressed", "true")
+    listed = page.get_by_role("list", name="Steps")
+    expect(listed.locator(".step-sentence")).to_have_count(5, timeout=10000)
+    assert [t.split(". ", 1)[1] for t in listed.locator(".step-sentence").all_inner_texts()] == [
+        "Open the gripper", "Move above grasp-can (joint move)", "Move to grasp-can slowly (straight move)",
+        "Close the gripper and check it holds something", "Move above grasp-can (straight move)"]
+
+    # A step added with the keyboard alone: a real button, then its text field.
+    say = page.get_by_role("group", name="Add a step").get_by_role("button", name="Say", exact=True)
+    say.focus()
+    page.keyboard.press("Enter")
+    text = page.get_by_role("group", name="Step 6").get_by_label("Text")
+    text.fill("Here is your red can.")
+    text.press("Tab")                                   # a change is described by the server
+    expect(listed.locator(".step-sentence").nth(5)).to_have_text("6. Say “Here is your red can.”", timeout=10000)
+    expect(page.locator(".steps-editor .steps-status")).to_contain_text("Unsaved changes")
+    page.get_by_role("button", name="Save steps").click()
+    expect(page.locator(".steps-editor .steps-status")).to_contain_text("Steps saved", timeout=10000)
+    saved = http(kitchen, "GET", "/api/programs/give_me_the_can/steps")
+    assert saved["in_sync"] and saved["steps"][-1] == {"kind": "say", "text": "Here is your red can."}
+    screenshot(page, "steps-1-pick-it-up")
+
+    page.get_by_role("button", name="Show as Python").click()
+    code = page.get_by_role("region", name="The program as Python")
+    expect(code).to_contain_text("close_and_check('grasp-can')")
+    python = http(kitchen, "GET", "/api/programs/give_me_the_can")["text"]
+    assert code.inner_text().strip() == python.strip()
+    assert "above_grasp_can = [0.0, 0.5, 0.21, 180.0, 0.0]  # above grasp-can" in python
+    screenshot(page, "steps-2-as-python")
+
+    page.get_by_role("button", name="Run", exact=True).click()
+    status = page.locator(".run-status")
+    expect(status).to_contain_text("give_me_the_can is running", timeout=15000)
+    expect(status).to_contain_text("give_me_the_can: finished.", timeout=180000)
+    output = page.get_by_role("log", name="Program output")
+    expect(output).to_contain_text("Here is your red can.")
+    expect(output).to_contain_text("done!")
+    lifted = sim.object_pose("red_can")
+    assert lifted[2] - can[2] == pytest.approx(steps.ABOVE_HEIGHT, abs=0.02)
+    screenshot(page, "steps-3-ran")
+
+    # Edited as Python: the steps say they no longer match it, and both are kept.
+    http(kitchen, "PUT", "/api/programs/give_me_the_can", {"text": python + "print('and one more line')\n"})
+    page.get_by_role("button", name="Python", exact=True).click()
+    page.get_by_role("button", name="give_me_the_can", exact=True).click()
+    expect(page.get_by_text("This Python was edited after the program's steps made it")).to_be_visible(timeout=10000)
+    page.get_by_role("button", name="Steps", exact=True).click()
+    expect(page.locator(".steps-editor .steps-status")).to_contain_text("no longer match", timeout=10000)
+    expect(listed.locator(".step-sentence")).to_have_count(6)
+    save = page.get_by_role("button", name="Save steps")
+    save.click()                                        # asks first: it replaces the edited Python
+    expect(page.get_by_role("button", name="Sure? It replaces the Python: touch again: Save steps")).to_be_visible()
+    assert http(kitchen, "GET", "/api/programs/give_me_the_can")["text"].endswith("print('and one more line')\n")
+    screenshot(page, "steps-4-not-in-sync")
+    page.get_by_role("button", name="Sure? It replaces the Python: touch again: Save steps").click()
+    expect(page.locator(".steps-editor .steps-status")).to_contain_text("Steps saved", timeout=10000)
+    wait_until(lambda: http(kitchen, "GET", "/api/programs/give_me_the_can")["text"] == python, timeout=10)
+    versions = http(kitchen, "GET", "/api/programs/give_me_the_can")["versions"]
+    assert len(versions) >= 2      # the edited Python is kept as a previous version
+    sim.reset_world()
