@@ -33,6 +33,12 @@ class Capture(Strict):
     name: Name | None = Field(None, description="the point's name; suggested (point-1, ...) when left out")
 
 
+class KeepPoint(Strict):
+    """A point to keep, as a touch proposed it: [x, y, z, rot(y'), rot(z'')] (m, deg)."""
+    values: Annotated[list[Number], Field(min_length=5, max_length=5)]
+    name: Name | None = Field(None, description="the point's name; suggested (above-can, point-3, ...) when left out")
+
+
 class Rename(Strict):
     name: Name
 
@@ -103,6 +109,14 @@ def capture(robot: RobotId, body: Capture, request: Request) -> dict:
         raise RpcError("unavailable", f"No position from {robot} yet: is its kinematics service running?")
     name = body.name or web.data.suggest_point_name(here, web.fleet.place(robot))
     return _as_json(web.data.add_point(name, here))
+
+
+@router.post("/points", summary="keep a point a touch proposed (the arm does not move)")
+def keep_point(body: KeepPoint, request: Request) -> dict:
+    data = web_of(request).data
+    values = [float(v) for v in body.values]
+    point = data.add_point(body.name or data.suggest_point_name(values), values)
+    return {"name": point.name, "values": point.values}
 
 
 @router.post("/points/{name}/rename", summary="rename a point")

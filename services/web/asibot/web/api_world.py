@@ -14,7 +14,6 @@ from typing import Annotated
 from fastapi import APIRouter, Path, Request, Response
 from pydantic import Field
 
-from asibot.web.api_files import Name
 from asibot.web.models import Number, RobotId, Strict
 from asibot.web.routing import known, off_loop, web_of
 
@@ -28,12 +27,6 @@ class Spot(Strict):
     """A spot of a camera's picture, in its image pixels (u across, v down)."""
     u: Pixel
     v: Pixel
-
-
-class KeepPoint(Strict):
-    """A point to keep, as a touch proposed it: [x, y, z, rot(y'), rot(z'')] (m, deg)."""
-    values: Annotated[list[Number], Field(min_length=5, max_length=5)]
-    name: Name | None = Field(None, description="the point's name; suggested (above-can, point-3, ...) when left out")
 
 
 @router.get("/robots/{robot}/depth-cameras", summary="the robot's depth cameras: picture size and where their pose comes from")
@@ -55,14 +48,6 @@ async def cloud(robot: RobotId, name: CameraName, request: Request) -> Response:
 async def touch(robot: RobotId, name: CameraName, body: Spot, request: Request) -> dict:
     web = web_of(request)
     return await off_loop(web.world.touch, known(web, robot), name, body.u, body.v)
-
-
-@router.post("/points", summary="keep a point a touch proposed (the arm does not move)")
-def keep_point(body: KeepPoint, request: Request) -> dict:
-    data = web_of(request).data
-    values = [float(v) for v in body.values]
-    point = data.add_point(body.name or data.suggest_point_name(values), values)
-    return {"name": point.name, "values": point.values}
 
 
 # --- calibration ---------------------------------------------------------------------------------
