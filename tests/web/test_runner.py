@@ -181,6 +181,9 @@ def test_error_sentence_names_the_users_line(recorder, tmp_path, files, sentence
 
 @pytest.mark.parametrize("text, sentence", [
     ("import sys\nsys.exit(3)\n", "exited with code 3"),
+    # A program that stops itself with its own words is said to have stopped for them.
+    ("import sys\nprint('closing')\nsys.exit('nothing in the gripper after closing at red-can')\n",
+     "nothing in the gripper after closing at red-can"),
     ("import os, signal\nos.kill(os.getpid(), signal.SIGUSR1)\n", "killed by signal 10 (SIGUSR1)"),
 ])
 def test_other_ends(recorder, tmp_path, text, sentence):

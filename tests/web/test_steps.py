@@ -410,3 +410,9 @@ def test_steps_whose_point_is_gone_are_still_shown(api, web):
     got = api.get("/api/programs/fetch/steps").json()
     assert got["described"] is None and got["points_changed"] and len(got["steps"]) == 5
     web[1].web.data.add_point("grasp-can", CAN)
+
+
+def test_a_template_program_is_named_after_the_template_and_the_point():
+    assert S.program_name("pick_it_up", "red can", []) == "pick_up_red_can"
+    assert S.program_name("pick_it_up", "red-can", ["pick_up_red-can", "pick_up_red-can_2"]) == "pick_up_red-can_3"
+    assert S.program_name("put_it_down", "shelf", ["pick_up_shelf"]) == "put_down_shelf"

@@ -43,7 +43,8 @@ class TemplateBody(Strict):
 
 
 class NewFromSteps(Strict):
-    name: Name
+    name: Name | None = Field(None, description="the program's name; when left out, the template's and the "
+                                                 "point's (pick_up_red-can)")
     template: Literal["empty", "pick_it_up", "put_it_down"] = Field(
         description="no steps yet, or a template's steps at `point`")
     point: Name | None = None
@@ -106,5 +107,6 @@ def template_steps(name: str, body: TemplateBody, request: Request) -> dict:
 def new_from_steps(body: NewFromSteps, request: Request) -> dict:
     data = web_of(request).data
     steps = _template(data, body.template, body.point)
-    made = data.steps.save(body.name, steps, new=True)
-    return _answer(data, body.name, made.steps, text=made.text, in_sync=True, points_changed=False)
+    name = body.name or steplib.program_name(body.template, body.point, data.programs())
+    made = data.steps.save(name, steps, new=True)
+    return _answer(data, name, made.steps, text=made.text, in_sync=True, points_changed=False)

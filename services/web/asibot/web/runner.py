@@ -397,7 +397,20 @@ def explain(code: int | None, cpu_seconds: float, stderr_tail: list[str], files:
         return error.reason, False, error
     if code is not None and code < 0:
         return f"killed by signal {-code} ({signal.Signals(-code).name})", False, None
+    said = exit_message(stderr_tail)
+    if code == 1 and said:
+        return said, False, None
     return f"exited with code {code}", False, None
+
+
+def exit_message(stderr_tail: list[str]) -> str | None:
+    """What a program said as it stopped itself with `sys.exit("...")` (Python prints it as the
+    last line of stderr and exits with 1): the program's own words for why ("nothing in the
+    gripper after closing at red-can"), or None. The full stop is the page's."""
+    lines = [line.strip() for line in stderr_tail if line.strip()]
+    if not lines or any(line.startswith("Traceback") for line in lines):
+        return None
+    return lines[-1].rstrip(".") or None
 
 
 def _limiter(limits: Limits) -> Callable[[], None]:

@@ -187,6 +187,19 @@ def put_it_down(point: str) -> list[Step]:
 
 
 TEMPLATES = {"pick_it_up": pick_it_up, "put_it_down": put_it_down}
+#: How a program made from a template is named when the person names it not: "pick_up_red-can".
+TEMPLATE_PROGRAM_PREFIX = {"pick_it_up": "pick_up", "put_it_down": "put_down", "empty": "steps"}
+
+
+def program_name(template: str, point: str | None, taken: Iterable[str]) -> str:
+    """A free program name for a template's program at `point`: the template and the point
+    ("pick_up_red-can"), with a number after it when that is taken ("pick_up_red-can_2")."""
+    base = "_".join(filter(None, [TEMPLATE_PROGRAM_PREFIX[template], re.sub(r"[^A-Za-z0-9_-]", "_", point or "")]))
+    names, n = set(taken), 2
+    name = base
+    while name in names:
+        name, n = f"{base}_{n}", n + 1
+    return name
 Template = Literal["pick_it_up", "put_it_down"]
 
 

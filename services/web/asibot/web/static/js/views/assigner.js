@@ -27,8 +27,24 @@ export default {
       remember('assigner.words', [...chosenWords]);
       b.setAttribute('aria-pressed', String(chosenWords.has(w)));
     };
+    // A word that is not in the list yet is added here, and chosen, without going to the Speech
+    // page (which is where one teaches the robot how the person says it).
+    const newWord = kept('assigner.newWord', el('input', { type: 'text', 'aria-label': 'New word or phrase', placeholder: 'give me the red can' }));
+    const addWord = () => attempt(async () => {
+      const text = newWord.value.trim();
+      if (!text) throw new Error('Type the word or phrase first.');
+      const word = knownWords.includes(text) ? text : (await api.post(paths.words, { text })).word;
+      chosenWords.add(word);
+      remember('assigner.words', [...chosenWords]);
+      setKept(newWord, '');
+      await refresh();
+      return word;
+    }, (w) => `"${w}" chosen for this task.`);
+    newWord.addEventListener('keydown', (e) => { if (e.key === 'Enter') addWord(); });
+    let knownWords = [];
     const refresh = async () => {
       const [p, w, i, t] = await Promise.all([api.get(paths.programs), api.get(paths.words), api.get(paths.icons), api.get(paths.tasks)]);
+      knownWords = w.words;
       const keep = program.value;
       program.replaceChildren(...p.programs.map((n) => el('option', { value: n }, n)));
       if (p.programs.includes(keep)) program.value = keep;
@@ -37,7 +53,7 @@ export default {
         const b = el('button', { type: 'button', 'aria-pressed': String(chosenWords.has(x)) }, x);
         b.addEventListener('click', () => toggleWord(x, b));
         return b;
-      }) : [el('span', { class: 'muted' }, 'No words yet: add them on the Speech page (a task also works by touch alone).')]));
+      }) : [el('span', { class: 'muted' }, 'No words yet: add one below (a task also works by touch alone).')]));
       icons.replaceChildren(...i.icons.map((x) => el('button', {
         type: 'button', role: 'radio', 'aria-checked': String(x.name === icon),
         'aria-label': `Icon ${x.name.replace(/\.[a-z]+$/, '')}`, dataset: { icon: x.name }, onclick: () => pickIcon(x.name),
@@ -78,6 +94,8 @@ export default {
         el('div', { class: 'row' }, el('label', {}, 'Task name ', name)),
         el('div', { class: 'row' }, el('label', {}, 'Program ', program)),
         el('h3', {}, 'Words that launch it'), words,
+        el('div', { class: 'row' }, el('label', {}, 'New word ', newWord),
+          el('button', { type: 'button', onclick: addWord }, 'Add and choose it')),
         el('h3', {}, 'Icon'), icons,
         el('div', { class: 'row' }, el('label', {}, 'Or upload an image: ', upload)),
         el('div', { class: 'row' }, el('button', { type: 'button', class: 'primary big', onclick: save }, 'Save task'))),

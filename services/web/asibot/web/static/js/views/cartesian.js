@@ -9,7 +9,7 @@ import { api, chosenRobot, paths, state } from '../api.js';
 import { calibrationPanel } from '../calibration.js';
 import { CameraPicture } from '../camera.js';
 import { gripperButtons, jogGrid, modeAndSpeed, stopButton } from '../jog.js';
-import { kept, setKept } from '../keep.js';
+import { kept, remember, setKept } from '../keep.js';
 import { loadPoints, pointsPanel } from '../points.js';
 import { attempt, attemptOn, el } from '../ui.js';
 import { viewer } from '../viewer3d.js';
@@ -108,11 +108,26 @@ function touchResult(touched) {
       return p;
     }, (p) => `Kept as ${p.name}: the grasp at what you touched.`),
   }, 'Keep as a point');
+  // The shortest way from a touch to a task: keep the grasp as a point, make the "Pick it up"
+  // program of steps from it, and go on to the Assigner with that program chosen.
+  const pickItUp = el('button', {
+    type: 'button', class: 'primary', hidden: !touched.reach.joints,
+    onclick: () => attempt(async () => {
+      const body = { values: touched.reach.point };
+      if (name.value.trim()) body.name = name.value.trim();
+      const point = await api.post(paths.points, body);
+      const program = await api.post(paths.stepPrograms, { template: 'pick_it_up', point: point.name });
+      remember('assigner.program', program.name);
+      location.hash = 'assigner';
+      return program;
+    }, (p) => `${p.name}: a program that picks it up, made of steps (see it on the Program page). Now name the task, give it words and an icon, and save it.`),
+  }, 'Pick it up: make a task');
   box.append(
     el('p', { class: 'touch-says' }, `You touched ${touched.says}.`),
     el('div', { class: 'row' }, OFFERS.map((o) => el('button', { type: 'button', dataset: { offer: o.key }, onclick: () => preview(o) }, o.label))),
     ...unreachable, confirm,
-    el('div', { class: 'row' }, keepIt, el('label', {}, 'Name ', name)));
+    el('div', { class: 'row' }, keepIt, el('label', {}, 'Name ', name)),
+    el('div', { class: 'row' }, pickItUp));
   return box;
 }
 

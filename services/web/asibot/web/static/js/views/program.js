@@ -271,8 +271,7 @@ export default {
     // named after the template and the point ("pick_up_grasp-can").
     const createFromSteps = (template, point = null) => attempt(async () => {
       const typed = newName.value.trim();
-      const name = typed || (point ? `${template === 'pick_it_up' ? 'pick_up' : 'put_down'}_${point}`.replace(/[^A-Za-z0-9_-]/g, '_') : '');
-      await api.post(paths.stepPrograms, { name, template, point });
+      const { name } = await api.post(paths.stepPrograms, { name: typed || null, template, point });
       setKept(newName, '');
       sessionStorage.setItem(`asibot.program.mode.${name}`, 'steps');
       await open(name);
