@@ -94,10 +94,19 @@ def fresh_page(browser, url: str, robots: tuple[str, ...] = (API_ROBOT,), size: 
 
 
 @pytest.fixture
-def page(browser, kitchen):
-    """A fresh page on the Task Creator, ready (its script started and its feed live)."""
-    with fresh_page(browser, kitchen.web_url) as page:
+def page(browser, kitchen, request):
+    """A fresh page on the Task Creator, ready (its script started and its feed live), at the
+    test module's PAGE_SIZE (width, height) if it names one."""
+    size = getattr(request.module, "PAGE_SIZE", (1366, 900))
+    with fresh_page(browser, kitchen.web_url, size=size) as page:
         yield page
+
+
+def http(stack, method: str, path: str, body: dict | None = None) -> dict:
+    """A call of the web's API that must succeed; its answer."""
+    status, answer = stack.web(method, "/" + path.lstrip("/"), body)
+    assert status < 400, f"{method} {path}: {status} {answer}"
+    return answer or {}
 
 
 def screenshot(page, name: str) -> Path:

@@ -89,6 +89,18 @@ def reset(kitchen) -> list[float]:
     return can_position(kitchen)
 
 
+def word_icon_save_and_launch(page, act: Actions) -> None:
+    """On the Assigner, the task named: a new word chosen, the can icon, saved; then launched."""
+    act.fill(page.get_by_label("New word or phrase"), WORD, "its word")
+    act.click(page.get_by_role("button", name="Add and choose it"), "Add and choose it")
+    page.get_by_role("button", name=WORD, exact=True).wait_for(timeout=5000)
+    act.click(page.get_by_role("radio", name="Icon can"), "the can icon")
+    act.click(page.get_by_role("button", name="Save task"), "Save task")
+    page.get_by_text(f'Task "{TASK}" saved').wait_for(timeout=5000)
+    tab(page, act, "Launcher")
+    act.click(page.get_by_role("button", name=f"Launch {TASK}"), f"Launch {TASK}")
+
+
 def by_touch(page, kitchen, act: Actions) -> None:
     """Touch the can, make the "Pick it up" task from it with a word and an icon, launch it."""
     tab(page, act, "Cartesian")
@@ -99,14 +111,7 @@ def by_touch(page, kitchen, act: Actions) -> None:
     act.click(page.get_by_role("button", name="Pick it up: make a task"), "Pick it up: make a task")
     page.get_by_role("heading", name="Make a task").wait_for(timeout=10000)
     act.fill(page.get_by_label("Task name"), TASK, "the task's name")
-    act.fill(page.get_by_label("New word or phrase"), WORD, "its word")
-    act.click(page.get_by_role("button", name="Add and choose it"), "Add and choose it")
-    page.get_by_role("button", name=WORD, exact=True).wait_for(timeout=5000)
-    act.click(page.get_by_role("radio", name="Icon can"), "the can icon")
-    act.click(page.get_by_role("button", name="Save task"), "Save task")
-    page.get_by_text(f'Task "{TASK}" saved').wait_for(timeout=5000)
-    tab(page, act, "Launcher")
-    act.click(page.get_by_role("button", name=f"Launch {TASK}"), f"Launch {TASK}")
+    word_icon_save_and_launch(page, act)
 
 
 def by_typing(page, kitchen, act: Actions, arm_still) -> None:
@@ -143,14 +148,7 @@ def by_typing(page, kitchen, act: Actions, arm_still) -> None:
     tab(page, act, "Assigner")
     act.fill(page.get_by_label("Task name"), TASK, "the task's name")
     act.choose(page.get_by_label("Program"), "red_can", "the program")
-    act.fill(page.get_by_label("New word or phrase"), WORD, "its word")
-    act.click(page.get_by_role("button", name="Add and choose it"), "Add and choose it")
-    page.get_by_role("button", name=WORD, exact=True).wait_for(timeout=5000)
-    act.click(page.get_by_role("radio", name="Icon can"), "the can icon")
-    act.click(page.get_by_role("button", name="Save task"), "Save task")
-    page.get_by_text(f'Task "{TASK}" saved').wait_for(timeout=5000)
-    tab(page, act, "Launcher")
-    act.click(page.get_by_role("button", name=f"Launch {TASK}"), f"Launch {TASK}")
+    word_icon_save_and_launch(page, act)
 
 
 def run_ends(page, since: float, timeout_s: float = 120) -> str:

@@ -19,7 +19,7 @@ import pytest
 from asibot import keys
 from asibot.testing import wait_until
 
-from .conftest import ROOT, screenshot
+from .conftest import ROOT, http, screenshot
 from .test_browser import ArmWatch
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
@@ -40,12 +40,6 @@ READY = {
 }
 APARTMENT_VIEWS = ("pioneer", "base")   # their axe test is in test_pioneer_page.py
 KITCHEN_VIEWS = [v for v in READY if v not in APARTMENT_VIEWS]
-
-
-def http(stack, method: str, path: str, body: dict | None = None) -> dict:
-    status, answer = stack.web(method, "/" + path.lstrip("/"), body)
-    assert status < 400, f"{method} {path}: {status} {answer}"
-    return answer or {}
 
 
 @pytest.fixture(scope="module")

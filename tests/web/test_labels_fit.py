@@ -13,7 +13,7 @@ import pytest
 
 from asibot.testing import wait_until
 
-from .conftest import _stack, screenshot
+from .conftest import _stack, http, screenshot
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
 
@@ -184,12 +184,6 @@ def command(page, robot: str) -> None:
     """Command `robot` with the Connection Manager's button, as a person does."""
     page.get_by_role("button", name=f"Command {robot}", exact=True).click()
     page.get_by_role("button", name=f"Commanding {robot}", exact=True).wait_for(timeout=10000)
-
-
-def http(stack, method: str, path: str, body: dict | None = None) -> dict:
-    status, answer = stack.web(method, path, body)
-    assert status < 400, f"{method} {path}: {status} {answer}"
-    return answer or {}
 
 
 def walk(page, size: str, found: list[dict], shots: bool = True) -> None:

@@ -114,6 +114,7 @@ def test_a_page_on_another_origin_can_do_nothing(kitchen, attacker):
     assert len(routes) >= 35
     # Touch to reach and the camera calibration are among them (api_world.py).
     for route in (["POST", f"/api/robots/{ROBOT}/cameras/evil/touch"], ["POST", f"/api/robots/{ROBOT}/cameras/evil/calibration/marks"],
+                  ["POST", f"/api/robots/{ROBOT}/cameras/evil/calibration/spot"],
                   ["POST", f"/api/robots/{ROBOT}/cameras/evil/calibration/solve"], ["DELETE", f"/api/robots/{ROBOT}/cameras/evil/calibration"],
                   ["POST", "/api/points"]):
         assert route in routes, route

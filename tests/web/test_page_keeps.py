@@ -17,7 +17,7 @@ import pytest
 
 from asibot.testing import wait_until
 
-from .conftest import _stack, fresh_page, screenshot
+from .conftest import _stack, fresh_page, http, screenshot
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
 
@@ -32,12 +32,6 @@ def worlds(tmp_path_factory):
                    ["sim/asibot-sim", "kinematics/asibot-sim", "sim/pioneer-sim"])
     yield stack
     stack.stop()
-
-
-def http(stack, method: str, path: str, body: dict | None = None) -> dict:
-    status, answer = stack.web(method, path, body)
-    assert status < 400, f"{method} {path}: {status} {answer}"
-    return answer or {}
 
 
 def engaged(worlds, robot: str) -> bool:

@@ -13,7 +13,7 @@ import pytest
 
 from asibot.web import reference
 
-from .conftest import ROOT, fresh_page, screenshot
+from .conftest import ROOT, http, screenshot
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
 
@@ -34,17 +34,8 @@ simCart.wait()
 """
 
 
-def http(stack, method: str, path: str, body: dict | None = None) -> dict:
-    status, answer = stack.web(method, path, body)
-    assert status < 400, f"{method} {path}: {status} {answer}"
-    return answer or {}
-
-
-@pytest.fixture
-def page(browser, kitchen):
-    """A fresh page (its own storage) at 1280x800 that commands asibot-sim."""
-    with fresh_page(browser, kitchen.web_url, (ROBOT,), (1280, 800)) as page:
-        yield page
+#: The `page` fixture's size (tests/web/conftest.py).
+PAGE_SIZE = (1280, 800)
 
 
 def open_program(page, kitchen, name: str, text: str):

@@ -11,7 +11,7 @@ from asibot.client import SimClient
 from asibot.testing import wait_until
 from asibot.web import steps
 
-from .conftest import fresh_page, screenshot
+from .conftest import http, screenshot
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(400)]
 
@@ -20,16 +20,8 @@ ROBOT = "asibot-sim"
 AT_THE_CAN = [0.0, 0.5, 0.09, 180.0, 0.0]
 
 
-def http(stack, method: str, path: str, body: dict | None = None) -> dict:
-    status, answer = stack.web(method, path, body)
-    assert status < 400, f"{method} {path}: {status} {answer}"
-    return answer or {}
-
-
-@pytest.fixture
-def page(browser, kitchen):
-    with fresh_page(browser, kitchen.web_url, (ROBOT,), (1280, 800)) as page:
-        yield page
+#: The `page` fixture's size (tests/web/conftest.py).
+PAGE_SIZE = (1280, 800)
 
 
 def test_pick_it_up_from_the_template_with_no_code_typed(page, kitchen):

@@ -30,6 +30,8 @@ def test_a_carer_teaches_the_red_can_by_touch_and_it_is_lifted_then_moved_3_cm(b
         output = run_ends(page, since)
         screenshot(page, "teach-by-touch-launched")
         assert len(act) <= GOAL_ACTIONS, "\n".join(act.done)
+        assert "Close the gripper and check it holds something" in output and "done!" in output
+        assert "Notice:" not in output              # every straight move was made straight
         lifted = can_position(kitchen)
         assert lifted[2] - start[2] > 0.08, f"the can is at {lifted}, it was at {start}; the run said:\n{output}"
         assert abs(lifted[0] - start[0]) < 0.02 and abs(lifted[1] - start[1]) < 0.02

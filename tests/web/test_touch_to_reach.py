@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from asibot import depth, keys
+from asibot import depth, keys, robots
 from asibot.messages import CameraInfo
 from asibot.testing import wait_until
 
@@ -115,3 +115,60 @@ def test_touch_the_can_go_above_it_and_the_wall_is_out_of_reach(browser, kitchen
         with page.expect_response(lambda r: r.url.endswith(f"/cameras/{CAMERA}/touch")) as reply:
             page.get_by_role("button", name="Select this spot").click()
         assert reply.value.ok, reply.value.text()
+
+
+#: The tops of three things on the counter, in the arm's frame: the calibration's marks (half
+#: their heights above their centres, kitchen.xml).
+MARKS = {"red_can": 0.06, "green_cup": 0.045, "water_bottle": 0.12}
+#: The arm's base in the kitchen's world frame (kitchen.xml: the station's arm_mount), m.
+MOUNT = np.array([-0.2, 0.0, 0.94])
+
+
+def move_and_wait(kitchen, kind: str, point: list[float]) -> None:
+    status, answer = kitchen.web("POST", f"/api/robots/{ROBOT}/move", {"kind": kind, "values": point})
+    assert status < 400, answer
+    wait_until(lambda: math.dist(arm_point(kitchen)[:3], point[:3]) < 0.002, timeout=60, interval=0.2,
+               message=f"the arm never reached {point}")
+
+
+def test_the_camera_is_calibrated_by_touching_three_marks_with_the_fingertips(browser, kitchen):
+    """The installer's walk-through, on the sim's camera whose true pose is known: touch a mark,
+    put the fingertips on it, "The tool is on the mark", three times; Solve gives back the pose."""
+    kitchen.bus.call(keys.driver_rpc(ROBOT, "reset_world"), {}, timeout=10)
+    info = camera_info(kitchen)
+    fingers = robots.get(ROBOT).finger_length
+    tops = [np.array(kitchen.bus.call(keys.driver_rpc(ROBOT, "object_pose"), {"name": n})["pos"]) - MOUNT + [0, 0, h]
+            for n, h in MARKS.items()]
+    with fresh_page(browser, kitchen.web_url, size=(1280, 800)) as page:
+        page.evaluate("location.hash = 'cartesian'")
+        picture = page.locator("img.camera-picture")
+        wait_until(lambda: picture.evaluate("i => i.complete && i.naturalWidth > 0"), timeout=15)
+        page.get_by_role("button", name="Calibrate the camera").click()
+        panel = page.get_by_role("region", name="Calibrate the camera")
+        try:
+            for i, top in enumerate(tops):
+                u, v = pixel_of(info, top)
+                box = picture.bounding_box()
+                width, height = picture.evaluate("i => [i.naturalWidth, i.naturalHeight]")
+                with page.expect_response(lambda r: r.url.endswith(f"/cameras/{CAMERA}/calibration/spot")) as seen:
+                    picture.click(position={"x": (u + 0.5) / width * box["width"], "y": (v + 0.5) / height * box["height"]})
+                assert seen.value.ok, seen.value.text()
+                # The fingertips onto the mark, from above it (a few mm over, as a careful hand leaves them).
+                over = [float(top[0]), float(top[1]), float(top[2]) + fingers, 180.0, 0.0]
+                move_and_wait(kitchen, "movj", [*over[:2], over[2] + 0.12, 180.0, 0.0])
+                move_and_wait(kitchen, "movl", [*over[:2], over[2] + 0.003, 180.0, 0.0])
+                panel.get_by_role("button", name="The tool is on the mark").click()
+                panel.get_by_text(f"{i + 1} mark{'s' if i else ''} so far").wait_for(timeout=10000)
+                move_and_wait(kitchen, "movl", [*over[:2], over[2] + 0.12, 180.0, 0.0])
+            panel.get_by_role("button", name="Solve").click()
+            result = panel.locator(".calibration-result")
+            result.get_by_text("Solved from 3 marks").wait_for(timeout=10000)
+            screenshot(page, "calibration-solved")
+            status, solved = kitchen.web("GET", f"/api/robots/{ROBOT}/cameras/{CAMERA}/calibration")
+            assert solved["residual_mm"] < 5, solved
+            found, truth = depth.pose_matrix(solved["pose"]), depth.pose_matrix(info.pose)
+            assert np.linalg.norm(found[:3, 3] - truth[:3, 3]) < 0.02, (found, truth)
+            assert f"{solved['residual_mm']} mm" in result.inner_text()
+        finally:
+            kitchen.web("DELETE", f"/api/robots/{ROBOT}/cameras/{CAMERA}/calibration")
+            kitchen.bus.call(keys.driver_rpc(ROBOT, "reset_world"), {}, timeout=10)

@@ -18,7 +18,7 @@ from asibot import keys
 from asibot.messages import Event, VoiceHeard
 from asibot.testing import Inbox, wait_until
 
-from .conftest import CHROMIUM, CHROMIUM_ARGS, _stack, screenshot
+from .conftest import CHROMIUM, CHROMIUM_ARGS, _stack, http, screenshot
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
 ROBOT = "asibot-sim"
@@ -40,12 +40,6 @@ def spoken(folder: Path, text: str) -> Path:
         w.setframerate(rate)
         w.writeframes(np.concatenate([quiet, speech, quiet]).tobytes())
     return out
-
-
-def http(stack, method: str, path: str, body: dict | None = None) -> dict:
-    status, answer = stack.web(method, path, body)
-    assert status < 400, f"{method} {path}: {status} {answer}"
-    return answer
 
 
 @pytest.fixture(scope="module")

@@ -20,11 +20,12 @@ from __future__ import annotations
 import collections
 import math
 from dataclasses import dataclass
-from typing import Protocol, Sequence
+from typing import Sequence
 
 import cv2
 import numpy as np
 
+from asibot.messages import CameraInfo
 from asibot.poses import quaternion_wxyz
 
 #: Points a cloud carries at most (about: the image is subsampled by a whole stride).
@@ -46,17 +47,6 @@ SEARCH_PX = 3
 
 class DepthError(ValueError):
     """A touch or a calibration that the depth cannot answer; the message is the sentence."""
-
-
-class Intrinsics(Protocol):
-    """What projecting needs of a CameraInfo (messages.CameraInfo has all of it)."""
-
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
 
 
 # --- poses ------------------------------------------------------------------------------------
@@ -94,12 +84,12 @@ def transform(t: np.ndarray, points: np.ndarray) -> np.ndarray:
 
 
 # --- pixels and points ------------------------------------------------------------------------
-def deproject(info: Intrinsics, u: float, v: float, depth: float) -> np.ndarray:
+def deproject(info: CameraInfo, u: float, v: float, depth: float) -> np.ndarray:
     """The optical-frame point of pixel (u, v) at `depth` m along the optical axis."""
     return np.array([(u - info.cx) / info.fx * depth, (v - info.cy) / info.fy * depth, depth])
 
 
-def project(info: Intrinsics, point: Sequence[float]) -> tuple[float, float]:
+def project(info: CameraInfo, point: Sequence[float]) -> tuple[float, float]:
     """The pixel (u, v) of an optical-frame point in front of the camera."""
     x, y, z = (float(c) for c in point)
     if z <= 0:
@@ -107,7 +97,7 @@ def project(info: Intrinsics, point: Sequence[float]) -> tuple[float, float]:
     return info.fx * x / z + info.cx, info.fy * y / z + info.cy
 
 
-def optical_points(depth: np.ndarray, info: Intrinsics) -> np.ndarray:
+def optical_points(depth: np.ndarray, info: CameraInfo) -> np.ndarray:
     """H x W x 3 optical-frame points of a depth image; NaN where it has no return (0)."""
     h, w = depth.shape
     u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
@@ -116,7 +106,7 @@ def optical_points(depth: np.ndarray, info: Intrinsics) -> np.ndarray:
     return np.stack([(u - info.cx) / info.fx * z, (v - info.cy) / info.fy * z, z], -1)
 
 
-def check_size(depth: np.ndarray, info: Intrinsics) -> None:
+def check_size(depth: np.ndarray, info: CameraInfo) -> None:
     if depth.ndim != 2 or depth.shape != (info.height, info.width):
         raise DepthError(f"The depth image is {depth.shape[::-1]} pixels but the camera says "
                          f"{info.width} x {info.height}; wait for the next frame.")
@@ -130,7 +120,7 @@ def decode_rgb(jpeg: bytes) -> np.ndarray:
     return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
 
 
-def cloud(depth: np.ndarray, rgb: np.ndarray | None, info: Intrinsics, camera_pose: np.ndarray,
+def cloud(depth: np.ndarray, rgb: np.ndarray | None, info: CameraInfo, camera_pose: np.ndarray,
           most: int = CLOUD_POINTS) -> tuple[np.ndarray, np.ndarray]:
     """The coloured points a camera sees, in the robot's frame: (N x 3 float32 m, N x 3 uint8).
     Every `stride`-th pixel of every `stride`-th row, so about `most` points at most; pixels with
@@ -235,7 +225,7 @@ def _vertical_normals(points: np.ndarray) -> np.ndarray:
     return np.nan_to_num(nz, nan=0.0)
 
 
-def object_at(depth: np.ndarray, info: Intrinsics, camera_pose: np.ndarray, u: float, v: float) -> Touched:
+def object_at(depth: np.ndarray, info: CameraInfo, camera_pose: np.ndarray, u: float, v: float) -> Touched:
     """What stands under pixel (u, v): see the module's docstring."""
     check_size(depth, info)
     su, sv = depth_at(depth, int(round(u)), int(round(v)))

@@ -56,11 +56,19 @@ def calibration(robot: RobotId, name: CameraName, request: Request) -> dict:
     return web_of(request).world.calibration(robot, name)
 
 
-@router.post("/robots/{robot}/cameras/{name}/calibration/marks",
-             summary="the tool is on the mark at this spot of the picture: pair them")
-async def add_mark(robot: RobotId, name: CameraName, body: Spot, request: Request) -> dict:
+@router.post("/robots/{robot}/cameras/{name}/calibration/spot",
+             summary="a calibration mark touched in the picture: where the camera sees it (read now, "
+                     "while the fingertips do not hide it)")
+async def see_mark(robot: RobotId, name: CameraName, body: Spot, request: Request) -> dict:
     web = web_of(request)
-    return await off_loop(web.world.add_mark, known(web, robot), name, body.u, body.v)
+    return await off_loop(web.world.see_mark, known(web, robot), name, body.u, body.v)
+
+
+@router.post("/robots/{robot}/cameras/{name}/calibration/marks",
+             summary="the fingertips are on the mark touched last: pair the two")
+async def add_mark(robot: RobotId, name: CameraName, request: Request) -> dict:
+    web = web_of(request)
+    return await off_loop(web.world.add_mark, known(web, robot), name)
 
 
 @router.post("/robots/{robot}/cameras/{name}/calibration/solve",

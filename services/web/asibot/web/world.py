@@ -64,6 +64,7 @@ class World:
         self._lock = threading.Lock()
         self._kept: dict[tuple[str, str, str], _Kept] = {}
         self._clouds: dict[tuple[str, str], tuple[tuple, int, bytes]] = {}   # (image, pose), N, body
+        self._seen_marks: dict[tuple[str, str], np.ndarray] = {}   # a calibration mark touched, not yet paired
         for stream, key in (("depth", keys.camera_depth), ("info", keys.camera_info)):
             bus.subscribe_raw(keys.every_robot(key, "*"), self._keeper(stream), maxsize=2)
 
@@ -203,13 +204,9 @@ class World:
     def calibration(self, robot: str, name: str) -> dict[str, Any]:
         return self.calibrations.get(robot, name).as_json()
 
-    def add_mark(self, robot: str, name: str, u: float, v: float) -> dict[str, Any]:
-        """Pair the mark at pixel (u, v) with where the fingertips are now (the arm's newest
-        point, as a capture reads it)."""
-        spec = _spec(robot)
-        here = self.tool_point(robot)
-        if here is None:
-            raise RpcError("unavailable", f"No position from {robot} yet: is its kinematics service running?")
+    def see_mark(self, robot: str, name: str, u: float, v: float) -> dict[str, Any]:
+        """Where the camera sees the mark at pixel (u, v), kept until the tool is on it. Read
+        now, while the mark is in view: once the fingertips are on it, the camera sees them."""
         info = self._info(robot, name)
         _, image = self._depth(robot, name)
         try:
@@ -218,6 +215,21 @@ class World:
         except depth.DepthError as exc:
             raise RpcError("bad_request", str(exc)) from None
         seen = depth.deproject(info, su, sv, float(image[sv, su]))
+        with self._lock:
+            self._seen_marks[(robot, name)] = seen
+        return {"seen": [round(float(c), 4) for c in seen]}
+
+    def add_mark(self, robot: str, name: str) -> dict[str, Any]:
+        """Pair the mark seen last with where the fingertips are now (the arm's newest point,
+        as a capture reads it)."""
+        spec = _spec(robot)
+        here = self.tool_point(robot)
+        if here is None:
+            raise RpcError("unavailable", f"No position from {robot} yet: is its kinematics service running?")
+        with self._lock:
+            seen = self._seen_marks.pop((robot, name), None)
+        if seen is None:
+            raise RpcError("bad_request", "Touch the mark in the picture first, then put the fingertips on it.")
         return self._checked(lambda: self.calibrations.add_mark(robot, name, seen.tolist(), fingertips(here, spec)))
 
     def solve(self, robot: str, name: str) -> dict[str, Any]:

@@ -57,6 +57,7 @@ export const paths = {
     cloud: (id, name) => at('robots', id, 'cameras', name, 'cloud'),
     touch: (id, name) => at('robots', id, 'cameras', name, 'touch'),
     calibration: (id, name) => at('robots', id, 'cameras', name, 'calibration'),
+    calibrationSpot: (id, name) => at('robots', id, 'cameras', name, 'calibration', 'spot'),
     calibrationMarks: (id, name) => at('robots', id, 'cameras', name, 'calibration', 'marks'),
     calibrationSolve: (id, name) => at('robots', id, 'cameras', name, 'calibration', 'solve'),
     capture: (id) => at('robots', id, 'capture'),

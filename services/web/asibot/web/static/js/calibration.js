@@ -28,7 +28,7 @@ export function calibrationPanel(camera, onChange = () => {}) {
     onclick: () => {
       if (!spot) { status.textContent = 'First touch the mark in the picture (or Pick a spot and select it).'; return; }
       attemptOn(state.chosen, async () => {
-        const c = await api.post(at(paths.robot.calibrationMarks), { u: spot[0], v: spot[1] });
+        const c = await api.post(at(paths.robot.calibrationMarks));
         count = c.marks.length;
         spot = null;
         say();
@@ -71,6 +71,13 @@ export function calibrationPanel(camera, onChange = () => {}) {
     get open() { return !root.hidden; },
     show() { root.hidden = false; useIt.hidden = true; load(); },
     close,
-    spot(u, v) { spot = [u, v]; say(); },
+    // The camera reads the mark now, while it is in view: the fingertips will hide it.
+    spot(u, v) {
+      attemptOn(state.chosen, async () => {
+        await api.post(at(paths.robot.calibrationSpot), { u, v });
+        spot = [u, v];
+        say();
+      });
+    },
   };
 }
