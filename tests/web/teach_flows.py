@@ -7,6 +7,7 @@ test of issue 27 runs the first; bench/bench_teach.py runs both and prints the t
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
@@ -89,7 +90,7 @@ def reset(kitchen) -> list[float]:
     return can_position(kitchen)
 
 
-def word_icon_save_and_launch(page, act: Actions) -> None:
+def word_icon_save_and_launch(page, act: Actions, shot: Callable[[str], object] = lambda name: None) -> None:
     """On the Assigner, the task named: a new word chosen, the can icon, saved; then launched."""
     act.fill(page.get_by_label("New word or phrase"), WORD, "its word")
     act.click(page.get_by_role("button", name="Add and choose it"), "Add and choose it")
@@ -97,21 +98,26 @@ def word_icon_save_and_launch(page, act: Actions) -> None:
     act.click(page.get_by_role("radio", name="Icon can"), "the can icon")
     act.click(page.get_by_role("button", name="Save task"), "Save task")
     page.get_by_text(f'Task "{TASK}" saved').wait_for(timeout=5000)
+    shot("teach-3-task-saved")
     tab(page, act, "Launcher")
     act.click(page.get_by_role("button", name=f"Launch {TASK}"), f"Launch {TASK}")
 
 
-def by_touch(page, kitchen, act: Actions) -> None:
-    """Touch the can, make the "Pick it up" task from it with a word and an icon, launch it."""
+def by_touch(page, kitchen, act: Actions, shot: Callable[[str], object] = lambda name: None) -> None:
+    """Touch the can, make the "Pick it up" task from it with a word and an icon, launch it;
+    `shot(name)` is called at each stage (a screenshot)."""
     tab(page, act, "Cartesian")
     picture = page.locator("img.camera-picture")
     wait_until(lambda: picture.evaluate("i => i.complete && i.naturalWidth > 0"), timeout=15)
     touched = act.touch_picture(*can_side_pixel(kitchen), "the red can in the camera picture")
     assert touched["reach"]["joints"], touched
+    page.locator(".touch-says").wait_for(timeout=10000)
+    shot("teach-1-touched")
     act.click(page.get_by_role("button", name="Pick it up: make a task"), "Pick it up: make a task")
     page.get_by_role("heading", name="Make a task").wait_for(timeout=10000)
+    shot("teach-2-assigner")
     act.fill(page.get_by_label("Task name"), TASK, "the task's name")
-    word_icon_save_and_launch(page, act)
+    word_icon_save_and_launch(page, act, shot)
 
 
 def by_typing(page, kitchen, act: Actions, arm_still) -> None:

@@ -194,7 +194,7 @@ def test_the_gripper_says_how_it_is_and_the_kitchen_is_put_back_from_the_page(pa
     kitchen.bus.call(keys.driver_rpc(ROBOT, "set_object_pose"),
                      {"name": "red_can", "pos": [start[0] + 0.15, start[1], start[2]]}, timeout=5)
     wait_until(lambda: abs(can_position(kitchen)[0] - start[0]) > 0.1, timeout=5)
-    page.get_by_role("button", name=f"Put the kitchen of {ROBOT} back as it started").click()
+    page.get_by_role("button", name=f"Put the kitchen back: {ROBOT}").click()
     page.get_by_text(f"{ROBOT}: the kitchen is back as it started.").wait_for(timeout=15000)
     assert max(abs(a - b) for a, b in zip(can_position(kitchen), start)) < 0.01
 

@@ -26,7 +26,7 @@ def test_a_carer_teaches_the_red_can_by_touch_and_it_is_lifted_then_moved_3_cm(b
     with fresh_page(browser, kitchen.web_url, size=(1280, 800)) as page:
         act = Actions(page)
         since = time.time()
-        by_touch(page, kitchen, act)
+        by_touch(page, kitchen, act, lambda name: screenshot(page, name))
         output = run_ends(page, since)
         screenshot(page, "teach-by-touch-launched")
         assert len(act) <= GOAL_ACTIONS, "\n".join(act.done)

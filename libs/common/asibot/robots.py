@@ -36,8 +36,12 @@ class RobotSpec:
     #: The simulated world that hosts this robot ("kitchen"); "" for a real robot.
     world: str = ""
     extra: dict = field(default_factory=dict)
-    #: How far beyond the tool point the fingertips' centre is, along the tool's z, m.
+    #: How far beyond the tool point the fingertips' centre is, along the tool's z, m: the
+    #: middle of what closes on an object (a grasp puts it there).
     finger_length: float = 0.0
+    #: How far beyond the tool point the fingers end, along the tool's z, m: what touches a
+    #: mark when a person puts "the fingertips on it" (the camera calibration).
+    fingertip_reach: float = 0.0
     #: How far below an object's top the fingertips close on it when they grasp it, m.
     grip_depth: float = 0.03
 
@@ -55,7 +59,8 @@ def _asibot(robot_id: str, solver: str = "asibot", world: str = "") -> RobotSpec
         base_link="base_link", tool_link="tool", gripper_max_opening=0.08,
         solver=solver, has_base=False, world=world,
         # The worked pick (examples/give_me_the_red_can.py): fingers 4 cm, grip 3 cm below the top.
-        finger_length=0.04, grip_depth=0.03)
+        # The fingers are 8 cm long (asibot.urdf): they end 4 cm beyond their middle.
+        finger_length=0.04, fingertip_reach=0.08, grip_depth=0.03)
 
 
 KATANA_JOINTS = ["katana_motor1_pan_joint", "katana_motor2_lift_joint", "katana_motor3_lift_joint",

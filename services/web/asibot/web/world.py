@@ -26,6 +26,7 @@ from asibot import depth, keys, messages, robots
 from asibot.bus import Bus
 from asibot.errors import MessageError, RpcError
 from asibot.messages import CameraInfo, DepthImage
+from asibot.poses import point_rotation
 from asibot.web.cameras import SILENT_S, Cameras
 from asibot.web.userdata.calibration import Calibration, Calibrations
 from asibot.web.userdata.errors import UserDataError
@@ -255,11 +256,10 @@ def _spec(robot: str) -> robots.RobotSpec:
 
 
 def fingertips(point: list[float], spec: robots.RobotSpec) -> list[float]:
-    """Where the fingertips are for a tool point [x y z rot(y') rot(z'')] (m, deg): the robot's
-    finger length along the tool's z axis."""
-    from asibot.poses import point_rotation
+    """Where the fingertips end for a tool point [x y z rot(y') rot(z'')] (m, deg): the robot's
+    fingertip reach along the tool's z axis (what touches a calibration mark)."""
     rot = point_rotation(point[0], point[1], math.radians(point[3]), math.radians(point[4]))
-    return [float(c) for c in np.asarray(point[:3]) + rot[:, 2] * spec.finger_length]
+    return [float(c) for c in np.asarray(point[:3]) + rot[:, 2] * spec.fingertip_reach]
 
 
 def describe(found: depth.Touched) -> str:

@@ -32,7 +32,7 @@ function card(robot) {
   if (robot.world) {
     // Simulation only: after a test run the can lies on the floor; one button puts it back.
     actions.push(el('button', {
-      type: 'button', 'aria-label': `Put the ${robot.world} of ${robot.id} back as it started`,
+      type: 'button', 'aria-label': `Put the ${robot.world} back: ${robot.id}`,
       onclick: () => attempt(() => api.post(paths.robot.resetWorld(robot.id)),
         `${robot.id}: the ${robot.world} is back as it started.`),
     }, `Put the ${robot.world} back`));
