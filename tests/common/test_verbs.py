@@ -51,7 +51,7 @@ def test_a_handler_gets_the_checked_arguments_after_before(served):
     ({"to": [0, 2]}, "y = 2 is outside [-1, 1] m"),
     ({"to": [0, 0], "fast": 1}, "'fast' must be true or false; got 1."),
     ({"to": "x" * 100_000}, "(100000 characters)"),
-    ([1, 2], "move takes a map of arguments"),
+    ([1, 2], "must be a map of named arguments"),
 ])
 def test_a_bad_request_is_refused_in_one_sentence_before_anything_runs(served, request_, sentence):
     bus, calls = served

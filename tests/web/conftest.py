@@ -4,6 +4,7 @@ chromium driven by Playwright (never a downloaded browser)."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import time
 from pathlib import Path
 
@@ -75,19 +76,28 @@ def browser():
         b.close()
 
 
-@pytest.fixture
-def page(browser, kitchen):
-    """A fresh page on the Task Creator, ready (its script started and its feed live)."""
-    context = browser.new_context(viewport={"width": 1366, "height": 900})
+@contextlib.contextmanager
+def fresh_page(browser, url: str, robots: tuple[str, ...] = (API_ROBOT,), size: tuple[int, int] = (1366, 900)):
+    """A page of its own (its own storage) on the Task Creator at `url`, ready: its script
+    started, its feed live and the cards of `robots` shown. It must raise no script error."""
+    context = browser.new_context(viewport={"width": size[0], "height": size[1]})
     page = context.new_page()
     errors: list[str] = []
     page.on("pageerror", lambda e: errors.append(str(e)))
-    page.goto(kitchen.web_url)
+    page.goto(url)
     page.wait_for_selector("body[data-ready=true]", timeout=15000)
-    page.wait_for_selector(".robot-card[data-robot=asibot-sim]", timeout=15000)
+    for robot in robots:
+        page.wait_for_selector(f".robot-card[data-robot={robot}]", timeout=30000)
     yield page
     context.close()
     assert not errors, f"the page raised: {errors}"
+
+
+@pytest.fixture
+def page(browser, kitchen):
+    """A fresh page on the Task Creator, ready (its script started and its feed live)."""
+    with fresh_page(browser, kitchen.web_url) as page:
+        yield page
 
 
 def screenshot(page, name: str) -> Path:

@@ -513,8 +513,8 @@ def test_good_news_stays_while_pointed_at_or_when_kept(page):
     go(page, "speech")
     notice = page.locator("#notice")
     page.get_by_label("Word or phrase").fill("stay a while")
-    page.get_by_role("button", name="Record word").click()
-    notice.get_by_text('"stay a while" recorded.').wait_for()
+    page.get_by_role("button", name="Add word").click()
+    notice.get_by_text('"stay a while" added.').wait_for()
     notice.hover()
     page.wait_for_timeout(5000)                                        # longer than the 4 s fade
     assert notice.is_visible(), "the message went while the pointer was on it"
@@ -523,8 +523,8 @@ def test_good_news_stays_while_pointed_at_or_when_kept(page):
 
     with_settings(page, "speech", messages="stay")
     page.get_by_label("Word or phrase").fill("stay for good")
-    page.get_by_role("button", name="Record word").click()
-    notice.get_by_text('"stay for good" recorded.').wait_for()
+    page.get_by_role("button", name="Add word").click()
+    notice.get_by_text('"stay for good" added.').wait_for()
     page.mouse.move(5, 880)
     page.wait_for_timeout(5000)
     assert notice.is_visible(), "a kept message went by itself"

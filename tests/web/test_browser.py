@@ -159,8 +159,8 @@ def test_the_wizard_gives_me_the_red_can(page, kitchen, arm):
     page.get_by_role("button", name="Next step").click()                     # -> Speech
 
     page.get_by_label("Word or phrase").fill("give me the red can")
-    page.get_by_role("button", name="Record word").click()
-    page.get_by_text('"give me the red can" recorded.').wait_for(timeout=5000)
+    page.get_by_role("button", name="Add word").click()
+    page.get_by_text('"give me the red can" added.').wait_for(timeout=5000)
     page.get_by_role("button", name="Next step").click()                     # -> Assigner
 
     page.get_by_label("Task name").fill("Give me the red can")

@@ -44,7 +44,7 @@ async function attack(target, routes, body) {
   form.append('file', new Blob(['PK'], {type: 'application/zip'}), 'seed.zip');
   try { await fetch(target + '/api/import', {method: 'POST', mode: 'no-cors', body: form}); } catch (e) {}
   const reads = {};
-  for (const path of ['/', '/api/robots', '/api/programs', '/api/export.zip']) {
+  for (const path of ['/', '/api/robots', '/api/programs', '/api/export.zip', '/api/client-reference']) {
     try { reads[path] = await (await fetch(target + path)).text(); } catch (e) { reads[path] = null; }
   }
   const socket = await new Promise((done) => {

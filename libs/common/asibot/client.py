@@ -73,6 +73,7 @@ class _Client:
         return True
 
     def close(self) -> None:
+        """Disconnect from the robot (a `with` block of the client does it at its end)."""
         if self._bus is not None and self._owns_bus:
             self._bus.close()
         self._bus = None
@@ -140,12 +141,14 @@ class CartesianClient(_Client):
         return self._call("stat")
 
     def inv(self, point: Sequence[float], res: list | None = None) -> list[float]:
+        """The joints (deg) that put the tool at `point`; also fills `res` in place like the seed's inv."""
         joints = self._call("inv", point=point)["joints"]
         if res is not None:
             res[:] = joints
         return joints
 
     def fwd(self, joints: Sequence[float]) -> list[float]:
+        """The point the tool would be at with `joints` (deg)."""
         return self._call("fwd", joints=joints)["point"]
 
     def movj(self, point: Sequence[float] | None = None, *, joints: Sequence[float] | None = None,

@@ -1,4 +1,5 @@
-"""The user-files half of the API: points, programs, words, tasks, icons, and running programs.
+"""The user-files half of the API: points, programs (and the Python reference of the clients they
+use), words, tasks, icons, and running programs.
 
 The files live in one data folder (`asibot.web.userdata`, in the seed's own formats); this
 module only maps HTTP onto it. Capturing a point reads the arm's newest state from the
@@ -15,6 +16,7 @@ from fastapi.responses import FileResponse
 from pydantic import Field, StrictInt, StrictStr
 
 from asibot.errors import RpcError
+from asibot.web import reference
 from asibot.web.models import Level, Number, RobotId, Strict
 from asibot.web.routing import known, off_loop, web_of
 
@@ -157,6 +159,13 @@ def rename_program(name: str, body: Rename, request: Request) -> dict:
 def delete_program(name: str, request: Request) -> dict:
     web_of(request).data.delete_program(name)
     return {}
+
+
+@router.get("/client-reference",
+            summary="the Program tab's Python reference: the clients' methods, signatures and docstrings (asibot.client)")
+def client_reference() -> dict:
+    # Not under /programs/: that is where a program named "reference" is read.
+    return reference.build()
 
 
 @router.post("/check", summary="syntax check of a program's text")

@@ -246,7 +246,7 @@ async def _on_page_message(web: Web, page, text: str) -> None:
             else:
                 await asyncio.to_thread(web.motion.point, msg.robot, msg.reading, _tool_pitch(web, msg.robot))
         except RpcError as exc:
-            page.offer(page_messages.Refused(exc.message, exc.code).json())
+            page.offer(page_messages.Refused(exc.message, exc.code, robot=msg.robot).json())
     elif isinstance(msg, page_messages.Release):
         robot, page.holding = page.holding, None
         if robot:
@@ -269,5 +269,5 @@ async def _on_refused(web: Web, page, refused: page_messages.Refused) -> None:
             try:
                 await asyncio.to_thread(web.motion.point, refused.robot, page_messages.STILL, None)
             except RpcError as exc:
-                refused = page_messages.Refused(exc.message, exc.code)
+                refused = page_messages.Refused(exc.message, exc.code, robot=refused.robot)
     page.offer(refused.json())

@@ -19,7 +19,7 @@ from pydantic_core import PydanticCustomError
 
 from asibot import robots
 from asibot.errors import CODES, RpcError
-from asibot.jog import SPEED_LEVELS
+from asibot.jog import speed_fraction
 from asibot.poses import POINT_AXES
 from asibot.web.pointer import DeviceReading
 from asibot.web.voice_relay import MicError, check_rate
@@ -45,7 +45,8 @@ class Refused(Exception):
 
     def json(self) -> str:
         code = {} if self.code is None else {"code": self.code}
-        return json.dumps({"type": "refused", **code, "text": self.text})
+        robot = {} if self.robot is None else {"robot": self.robot}   # the page names it
+        return json.dumps({"type": "refused", **code, **robot, "text": self.text})
 
 
 def _refuse(code: str, sentence: str) -> PydanticCustomError:
@@ -59,9 +60,11 @@ def whole(value: object) -> TypeGuard[int]:
 
 
 def check_level(level: int) -> int:
-    """A speed level, 1 (slowest) to 5, else a bad_request with the sentence the page shows."""
-    if not whole(level) or not 1 <= level <= len(SPEED_LEVELS):
-        raise RpcError("bad_request", f"The speed level must be 1 to {len(SPEED_LEVELS)}; got {level!r}.")
+    """A speed level, 1 (slowest) to 5, else a bad_request with the jog's own sentence."""
+    try:
+        speed_fraction(level)
+    except ValueError as exc:
+        raise RpcError("bad_request", str(exc)) from None
     return level
 
 

@@ -9,7 +9,8 @@ login) with CPU, memory, process and wall-clock limits, no shell, no stdin. Stop
 process it started at once, however it detached. Its output comes back line by line, capped,
 and whenever it ends for any reason but a clean exit the arm is told to stop (`stop_robot`),
 because a program that dies mid-motion must not leave the arm moving. The page gets a sentence
-saying why it ended.
+saying why it ended; a Python error as one sentence with the user's line and its traceback as
+details, the machine's paths left out of both and of the output (asibot.web.tracebacks).
 
 Plain Python on purpose: the server wires the callbacks to its WebSocket and to the bus.
 """
@@ -21,18 +22,18 @@ import concurrent.futures
 import dataclasses
 import logging
 import os
-import re
 import resource
 import signal
 import subprocess
 import sys
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any, Callable
 
 from asibot.web.sandbox import Prepared, Sandbox, exit_code
+from asibot.web.tracebacks import Files, PythonError, read_error
 
 log = logging.getLogger(__name__)
 
@@ -47,7 +48,6 @@ GONE_TIMEOUT = 5.0
 CUT_MARK = " [line cut]"
 #: Text in the stderr tail that says the program ran out of memory (Python, C++, OpenBLAS...).
 _MEMORY_MARKERS = ("MemoryError", "std::bad_alloc", "Cannot allocate memory", "Memory allocation")
-_FRAME = re.compile(r'^\s*File "(?P<file>.+)", line (?P<line>\d+)')
 
 
 @dataclass
@@ -81,7 +81,11 @@ class Limits:
 
 @dataclass
 class RunResult:
-    """How one run ended, for the page: `reason` is a sentence for the user."""
+    """How one run ended, for the page: `reason` says it to the user, as words that follow the
+    program's name and take the full stop after them ("finished", "stopped by the user",
+    "failed with an error on line 7: ..."). A run that ended in a Python error also has
+    `error`, the one sentence the page shows ("Line 7: ... point."), the user's `line` and the
+    traceback's `details`, which its output no longer holds."""
 
     program: str
     robot: str
@@ -90,14 +94,19 @@ class RunResult:
     exit_code: int | None  # negative: killed by that signal (subprocess' convention)
     reason: str
     ok: bool
+    error: str | None = None
+    line: int | None = None
+    details: list[str] = field(default_factory=list)
 
 
 class ProgramRunner:
     """Runs one user program at a time in a child process with limits (see the module doc).
 
-    Callbacks run on the runner's threads: `on_output(stream, line)` with stream "out" or
-    "err" (calls are serialised), `stop_robot(robot)` when a run ends in anything but a clean
-    exit, then `on_exit(result)`. Their exceptions are logged and otherwise ignored.
+    Callbacks run on the runner's threads: `on_start(status)` once a run has started, before
+    any of its output (with `status()` of the new run; it runs inside `start`, so it must be
+    quick and must not call the runner), `on_output(stream, line)` with stream "out" or "err"
+    (calls are serialised), `stop_robot(robot)` when a run ends in anything but a clean exit,
+    then `on_exit(result)`. Their exceptions are logged and otherwise ignored.
     """
 
     def __init__(self, python: str = sys.executable, limits: Limits | None = None,
@@ -105,13 +114,15 @@ class ProgramRunner:
                  on_output: Callable[[str, str], None] | None = None,
                  on_exit: Callable[[RunResult], None] | None = None,
                  stop_robot: Callable[[str], None] | None = None,
-                 *, sandbox: Sandbox | None = None) -> None:
+                 *, sandbox: Sandbox | None = None,
+                 on_start: Callable[[dict[str, Any]], None] | None = None) -> None:
         self.python = python
         self.sandbox = sandbox if sandbox is not None else Sandbox()
         self.limits = limits or Limits()
         self.env = dict(env or {})
         self.on_output = on_output
         self.on_exit = on_exit
+        self.on_start = on_start
         self.stop_robot = stop_robot
         self._lock = threading.Lock()         # guards the run's state below
         self._signal_lock = threading.Lock()  # signals vs reaping: never signal a reaped pgid
@@ -177,14 +188,17 @@ class ProgramRunner:
             self._ring.clear()
             self._reaped.clear()
             self._done.clear()
+            # Before its first line: a page that hears of the run clears the last run's output.
+            _call(self.on_start, self._status())
             tail: collections.deque[str] = collections.deque(maxlen=STDERR_TAIL)
-            readers = [threading.Thread(target=self._read, args=(proc.stdout, "out", None),
+            files = Files(run.program)
+            readers = [threading.Thread(target=self._read, args=(proc.stdout, "out", None, None),
                                         name=f"runner-out-{proc.pid}", daemon=True),
-                       threading.Thread(target=self._read, args=(proc.stderr, "err", tail),
+                       threading.Thread(target=self._read, args=(proc.stderr, "err", tail, files),
                                         name=f"runner-err-{proc.pid}", daemon=True)]
             for reader in readers:
                 reader.start()
-            self._waiter = threading.Thread(target=self._wait, args=(proc, run, limits, readers, tail),
+            self._waiter = threading.Thread(target=self._wait, args=(proc, run, limits, readers, tail, files),
                                             name=f"runner-wait-{proc.pid}", daemon=True)
             self._waiter.start()
             self._timer = threading.Timer(limits.wall_seconds, self._out_of_time, args=(proc, limits))
@@ -239,16 +253,23 @@ class ProgramRunner:
 
     def status(self) -> dict[str, Any]:
         with self._lock:
-            running = not self._done.is_set()
-            return {"program": self._program or None, "robot": self._robot or None,
-                    "pid": self._proc.pid if running and self._proc else None,
-                    "running": running, "started": self._started or None,
-                    "last": dataclasses.asdict(self._last) if self._last else None}
+            return self._status()
+
+    def _status(self) -> dict[str, Any]:
+        """status(), with the lock held."""
+        running = not self._done.is_set()
+        return {"program": self._program or None, "robot": self._robot or None,
+                "pid": self._proc.pid if running and self._proc else None,
+                "running": running, "started": self._started or None,
+                "last": dataclasses.asdict(self._last) if self._last else None}
 
     # -- threads ---------------------------------------------------------------------------
 
-    def _read(self, stream: IO[bytes], name: str, tail: collections.deque[str] | None) -> None:
-        """Pass each line on, capped; an endless line is skipped past so it cannot fill memory."""
+    def _read(self, stream: IO[bytes], name: str, tail: collections.deque[str] | None,
+              files: Files | None) -> None:
+        """Pass each line on, capped; an endless line is skipped past so it cannot fill memory.
+        `tail` keeps the lines as written (they explain the end); `files` names the files of
+        the lines passed on without the machine's paths."""
         chars = self.limits.max_line_chars
         try:
             while True:
@@ -269,6 +290,8 @@ class ProgramRunner:
                     line = line[:chars] + CUT_MARK
                 if tail is not None:
                     tail.append(line)
+                if files is not None:
+                    line = files.line(line)
                 with self._output_lock:
                     self._ring.append((name, line))
                     _call(self.on_output, name, line)
@@ -278,7 +301,7 @@ class ProgramRunner:
             stream.close()
 
     def _wait(self, proc: subprocess.Popen[bytes], run: Prepared, limits: Limits,
-              readers: list[threading.Thread], tail: collections.deque[str]) -> None:
+              readers: list[threading.Thread], tail: collections.deque[str], files: Files) -> None:
         pid = proc.pid
         os.waitid(os.P_PID, pid, os.WEXITED | os.WNOWAIT)
         # The exited leader is a zombie until reaped, which keeps its process group id ours:
@@ -309,14 +332,30 @@ class ProgramRunner:
         run.close()
         for reader in readers:
             reader.join(timeout=2.0)
-        reason, ok = explain(code, cpu, list(tail), run.program, limits, stop_reason,
-                             out_of_memory=oom, out_of_tasks=crowded)
+        reason, ok, error = explain(code, cpu, list(tail), files, limits, stop_reason,
+                                    out_of_memory=oom, out_of_tasks=crowded)
         result = RunResult(program=self._program, robot=self._robot, started=self._started,
                            ended=time.time(), exit_code=code, reason=reason, ok=ok)
+        if error is not None:
+            result.error, result.line, result.details = error.sentence, error.line, error.details
+            self._take_from_output(error.taken)
         with self._lock:
             self._last = result
             self._done.set()
         _call(self.on_exit, result)
+
+    def _take_from_output(self, count: int) -> None:
+        """Take the last `count` stderr lines out of the output: the traceback the result
+        holds as its details (the page shows the sentence, and the traceback on demand)."""
+        with self._output_lock:
+            kept: list[tuple[str, str]] = []
+            for entry in reversed(self._ring):
+                if count > 0 and entry[0] == "err":
+                    count -= 1
+                else:
+                    kept.append(entry)
+            self._ring.clear()
+            self._ring.extend(reversed(kept))
 
     def _kill(self, proc: subprocess.Popen[bytes], run: Prepared) -> None:
         """SIGKILL the run's group, namespace and cgroup (the last two are reuse-safe)."""
@@ -335,55 +374,30 @@ class ProgramRunner:
                         pass
 
 
-def explain(code: int | None, cpu_seconds: float, stderr_tail: list[str], path: Path,
+def explain(code: int | None, cpu_seconds: float, stderr_tail: list[str], files: Files,
             limits: Limits, stop_reason: str | None = None, *, out_of_memory: bool = False,
-            out_of_tasks: bool = False) -> tuple[str, bool]:
-    """Why a run ended, as (sentence for the user, ok). `out_of_memory`/`out_of_tasks`: its
-    cgroup saw the OOM killer / a refused fork or thread."""
+            out_of_tasks: bool = False) -> tuple[str, bool, PythonError | None]:
+    """Why a run ended, as (RunResult.reason, ok, the Python error it ended with).
+    `out_of_memory`/`out_of_tasks`: its cgroup saw the OOM killer / a refused fork or thread."""
     if stop_reason is not None:
-        return stop_reason, False
+        return stop_reason, False, None
     if code == -signal.SIGXCPU or (code == -signal.SIGKILL and cpu_seconds >= limits.cpu_seconds):
-        return f"stopped: it used all of its {limits.cpu_seconds} s of CPU time", False
+        return f"stopped: it used all of its {limits.cpu_seconds} s of CPU time", False, None
     text = "\n".join(stderr_tail)
     # A SIGKILL that neither we nor the CPU limit sent is, on a robot PC, the kernel's OOM killer.
     if code != 0 and (out_of_memory or code == -signal.SIGKILL or any(m in text for m in _MEMORY_MARKERS)):
-        return f"stopped: it needed more memory than its limit of {limits.memory_bytes // 2**20} MiB", False
+        return f"stopped: it needed more memory than its limit of {limits.memory_bytes // 2**20} MiB", False, None
     if code != 0 and out_of_tasks:
         return (f"stopped: it started more processes and threads than its limit of {limits.max_tasks}",
-                False)
+                False, None)
     if code == 0:
-        return "finished", True
-    error = _traceback_error(stderr_tail, path)
+        return "finished", True, None
+    error = read_error(stderr_tail, files)
     if error is not None:
-        return error, False
+        return error.reason, False, error
     if code is not None and code < 0:
-        return f"killed by signal {-code} ({signal.Signals(-code).name})", False
-    return f"exited with code {code}", False
-
-
-def _traceback_error(lines: list[str], path: Path) -> str | None:
-    """'failed with an error on line N: <message>' from the last traceback on stderr.
-
-    N is the line of the user's own file in the deepest frame that is theirs: an error inside
-    a library points at the user's line that called it. Syntax errors have no "Traceback"
-    header but the same `File "...", line N` frame.
-    """
-    starts = [i for i, line in enumerate(lines) if line.startswith("Traceback (most recent call last)")]
-    block = lines[starts[-1]:] if starts else lines
-    own = os.path.realpath(path)
-    line_no = None
-    for line in block:
-        m = _FRAME.match(line)
-        if m and os.path.realpath(m["file"]) == own:
-            line_no = int(m["line"])
-    messages = [line for line in block if line.strip() and not line[0].isspace()
-                and not line.startswith("Traceback (")]
-    if not messages or (line_no is None and not starts):
-        return None
-    message = messages[-1].strip()
-    if line_no is None:
-        return f"failed with an error: {message}"
-    return f"failed with an error on line {line_no}: {message}"
+        return f"killed by signal {-code} ({signal.Signals(-code).name})", False, None
+    return f"exited with code {code}", False, None
 
 
 def _limiter(limits: Limits) -> Callable[[], None]:

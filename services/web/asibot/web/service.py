@@ -73,6 +73,9 @@ class WebService(runtime.Service):
             env={"ASIBOT_ROUTER": bus.endpoint},
             on_output=lambda stream, line: live.send({"type": "output", "stream": stream, "line": line}),
             on_exit=self._ended,
+            # Every page hears that a run started (the Program tab, the Launcher, however it was
+            # launched: a page, the voice service, the AsTeRICS bridge), as it hears that one ended.
+            on_start=lambda status: live.send({"type": "run", "status": status}),
             stop_robot=lambda robot: stop_quietly(motion, robot, "its program ended"))
         tasks = TaskDesk(bus, data, runner, is_live=lambda robot: robot in self.fleet.ids())
         names = [host, *local_http.names_from_env(HOSTS_ENV)]

@@ -47,7 +47,7 @@ class Words:
     def add(self, text: str) -> str:
         text = check_word(text)
         if text.casefold() in {w.casefold() for w in self.all()}:
-            raise AlreadyExists(f"The word {quote(text)} is already recorded.")
+            raise AlreadyExists(f"The word {quote(text)} is already in the list of words.")
         self.write(self.all() + [text])
         return text
 
@@ -56,7 +56,7 @@ class Words:
         words = self.all()
         kept = [w for w in words if w.casefold() != text.casefold()]
         if len(kept) == len(words):
-            raise NotFound(f"The word {quote(text)} is not recorded.")
+            raise NotFound(f"The word {quote(text)} is not in the list of words.")
         self.write(kept)
 
     def add_new(self, words: list[str]) -> None:

@@ -64,6 +64,7 @@ export const paths = {
   runProgram: (name) => at('programs', name, 'run'),
   restoreVersion: (name, version) => at('programs', name, 'versions', version, 'restore'),
   check: at('check'),
+  clientReference: at('client-reference'),
   run: at('run'),
   stopRun: at('run', 'stop'),
   words: at('words'),

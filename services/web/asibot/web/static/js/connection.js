@@ -61,3 +61,14 @@ export function mountConnection(root) {
   });
   render();
 }
+
+// A tab about `robot` while the page commands another (`commanded`, or none): which robot the tab
+// is about, and the one button that commands it. The tab shows its controls once it is commanded.
+export function offerToCommand(robot, what, commanded) {
+  return el('section', { class: 'about-robot', 'aria-label': `About ${robot.id}` },
+    el('p', { class: 'big' }, `This page is about ${robot.id}, ${what}.`),
+    el('p', {}, commanded
+      ? `The page commands ${commanded.id} now. Its controls here would move ${robot.id}: they are shown once you command it.`
+      : `No robot is commanded yet. The controls here are shown once you command ${robot.id}.`),
+    el('button', { type: 'button', class: 'primary', onclick: () => choose(robot.id) }, `Command ${robot.id}`));
+}

@@ -7,7 +7,7 @@
 // With switch scanning (scanning.js) a hold cannot be held: a select starts the movement and the
 // next press of the switch stops it; the stops above still apply.
 import { api, chosenRobot, paths, sendLive, state } from './api.js';
-import { attempt, el, fmt } from './ui.js';
+import { attemptOn, el, fmt } from './ui.js';
 
 const BEAT_MS = 80;
 const prefs = {
@@ -103,7 +103,7 @@ export function jogGrid(space, rows, read) {
         type: 'button', 'aria-label': `${row.label} ${direction < 0 ? 'minus' : 'plus'}`,
         onclick: () => {
           if (prefs.mode !== 'step' || !chosenRobot()) return;
-          attempt(() => api.post(paths.robot.step(state.chosen),
+          attemptOn(state.chosen, (robot) => api.post(paths.robot.step(robot),
             { space, axis: row.axis, direction, level: prefs.level }));
         },
       }, direction < 0 ? '−' : '+');
@@ -123,13 +123,13 @@ export function jogGrid(space, rows, read) {
 export function stopButton() {
   return el('button', {
     type: 'button', class: 'danger',
-    onclick: () => state.chosen && attempt(() => api.post(paths.robot.stop(state.chosen))),
+    onclick: () => state.chosen && attemptOn(state.chosen, (robot) => api.post(paths.robot.stop(robot))),
   }, 'Stop arm');
 }
 
 // Open and close the gripper of the robot the page commands (the Cartesian and Pointer tabs).
 export function grip(close) {
-  return attempt(() => api.post(paths.robot.gripper(state.chosen), { close }),
+  return attemptOn(state.chosen, (robot) => api.post(paths.robot.gripper(robot), { close }),
     close ? (r) => (r.holding ? 'Gripper closed: holding.' : 'Gripper closed: empty.') : 'Gripper open.');
 }
 

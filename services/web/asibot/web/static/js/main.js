@@ -1,9 +1,10 @@
 // The page: tabs as client-side views (a tab change loads no page), the Connection Manager, the
-// emergency stop (button and Esc key), and the live feed that keeps every view current.
+// emergency stop (button and Esc key: estop.js), and the live feed that keeps every view current.
 import { api, chosenRobot, connectFeed, onChange, onMessage, paths, state } from './api.js';
 import { mountConnection } from './connection.js';
+import { startEmergencyStop } from './estop.js';
 import { startScanning } from './scanning.js';
-import { attempt, el, notify } from './ui.js';
+import { about, el, notify } from './ui.js';
 import { viewer } from './viewer3d.js';
 import { render as renderWizard } from './wizard.js';
 import home from './views/home.js';
@@ -21,10 +22,6 @@ import access from './views/access.js';
 
 const VIEWS = [home, joint, cartesian, pointer, program, speech, assigner, launcher, video, pioneer, base, access];
 let active = null;   // { view, handle }
-
-function emergencyStop() {
-  attempt(() => api.post(paths.estop), (r) => `Emergency stop: ${r.robots.length ? r.robots.join(', ') : 'no robot'} stopped. Release it in the Connection Manager.`);
-}
 
 function show(id) {
   const view = VIEWS.find((v) => v.id === id) || home;
@@ -71,8 +68,7 @@ async function start() {
   tabs();
   mountConnection(document.getElementById('connection'));
   startScanning();
-  document.getElementById('estop').addEventListener('click', emergencyStop);
-  document.addEventListener('keydown', (e) => { if (e.key === 'Escape') emergencyStop(); });
+  startEmergencyStop();
   window.addEventListener('hashchange', () => show(location.hash.slice(1)));
   let shownRobot;
   onChange((what) => {
@@ -83,7 +79,7 @@ async function start() {
     if (active && active.handle.update) active.handle.update(robot);
   });
   // A streamed motion (a held jog button, the pointer) that the server refused: say why.
-  onMessage((msg) => { if (msg.type === 'refused') notify(msg.text); });
+  onMessage((msg) => { if (msg.type === 'refused') notify(about(msg.robot, msg.text)); });
   connectFeed();
   show(location.hash.slice(1) || 'home');
   document.body.dataset.ready = 'true';

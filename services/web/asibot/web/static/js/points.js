@@ -1,7 +1,8 @@
 // Taught points: capture the arm's point (also while it moves), rename, delete, and go there
 // with one touch. Shared by the Joint and Cartesian pages; the Program page lists them too.
 import { api, paths, state } from './api.js';
-import { attempt, confirmable, el, fmt, notify } from './ui.js';
+import { kept, setKept } from './keep.js';
+import { attempt, attemptOn, confirmable, el, fmt, notify } from './ui.js';
 
 const listeners = new Set();
 export function onPointsChange(fn) { listeners.add(fn); return () => listeners.delete(fn); }
@@ -18,7 +19,7 @@ function row(point) {
     el('span', { class: 'pvals' }, point.values.map((v, i) => fmt(v, i < 3 ? 3 : 1)).join('  ')),
     el('button', {
       type: 'button', class: 'primary', 'aria-label': `Go to ${point.name}`,
-      onclick: () => state.chosen && attempt(() => api.post(paths.robot.goToPoint(state.chosen, point.name), { kind: 'movj' }),
+      onclick: () => attemptOn(state.chosen, (robot) => api.post(paths.robot.goToPoint(robot, point.name), { kind: 'movj' }),
         `Moving to ${point.name}.`),
     }, 'Go'),
     el('button', { type: 'button', 'aria-label': `Rename ${point.name}`, onclick: edit }, 'Rename'),
@@ -32,7 +33,8 @@ function row(point) {
       await api.post(paths.renamePoint(point.name), { name: input.value.trim() });
       await loadPoints();
     });
-    input.addEventListener('keydown', (e) => { if (e.key === 'Enter') save(); if (e.key === 'Escape') { e.stopPropagation(); show(); } });
+    // Esc cancels the new name; preventDefault tells the emergency stop's key that it did (estop.js).
+    input.addEventListener('keydown', (e) => { if (e.key === 'Enter') save(); if (e.key === 'Escape') { e.preventDefault(); show(); } });
     li.replaceChildren(input, el('button', { type: 'button', class: 'primary', onclick: save }, 'Save name'),
       el('button', { type: 'button', onclick: show }, 'Cancel'));
     input.focus();
@@ -44,13 +46,12 @@ function row(point) {
 
 export function pointsPanel() {
   const list = el('ul', { class: 'points', 'aria-label': 'Taught points' });
-  const name = el('input', { type: 'text', 'aria-label': 'Name of the next point', placeholder: 'point-1' });
+  const name = kept('points.name', el('input', { type: 'text', 'aria-label': 'Name of the next point', placeholder: 'point-1' }));
   const capture = el('button', {
     type: 'button', class: 'primary capture',
-    onclick: () => attempt(async () => {
-      if (!state.chosen) throw new Error('Choose a robot in the Connection Manager first.');
-      const p = await api.post(paths.robot.capture(state.chosen), name.value.trim() ? { name: name.value.trim() } : {});
-      name.value = '';
+    onclick: () => attemptOn(state.chosen, async (robot) => {
+      const p = await api.post(paths.robot.capture(robot), name.value.trim() ? { name: name.value.trim() } : {});
+      setKept(name, '');
       await loadPoints();
       return p;
     }, (p) => `Captured ${p.name}.`),

@@ -62,8 +62,9 @@ export function notify(text, kind = 'error') {
 
 // A button that asks first: the first press arms it ("Sure? Touch again"), the second does it.
 // It stays armed until the person presses something else: no time limit, so a switch user who
-// scans back to it is not hurried.
-export function confirmable(label, attrs, action) {
+// scans back to it is not hurried. `ask`: the armed button's words; `needed()`: whether to ask
+// at all this time (false: the first press does it).
+export function confirmable(label, attrs, action, { ask = 'Sure? Touch again', needed = () => true } = {}) {
   const name = attrs['aria-label'];
   let armed = false;
   const disarm = (e) => {
@@ -76,10 +77,10 @@ export function confirmable(label, attrs, action) {
   const b = el('button', {
     type: 'button', class: 'danger', ...attrs,
     onclick: () => {
-      if (armed) { disarm(); action(); return; }
+      if (armed || !needed()) { disarm(); action(); return; }
       armed = true;
-      b.textContent = 'Sure? Touch again';
-      if (name) b.setAttribute('aria-label', `Sure? Touch again: ${name}`);
+      b.textContent = ask;
+      if (name) b.setAttribute('aria-label', `${ask}: ${name}`);
       document.addEventListener('click', disarm, true);
     },
   }, label);
@@ -96,6 +97,26 @@ export async function attempt(action, success) {
     notify(e.message);
     return undefined;
   }
+}
+
+// A sentence about a robot names it: "asibot-sim: Out of the arm's reach." (unless it does).
+export function about(robot, text) {
+  if (!robot || !text || text.includes(robot)) return text;
+  return `${robot}: ${text}`;
+}
+
+// attempt() of an action on one robot (the one the page commands, or the one a tab is about):
+// its success and its refusal both name the robot. No robot: the person is told to choose one.
+export function attemptOn(robot, action, success) {
+  return attempt(async () => {
+    if (!robot) throw new Error('No robot commanded: press Command beside one in the Connection Manager first.');
+    try {
+      return await action(robot);
+    } catch (e) {
+      e.message = about(robot, e.message);
+      throw e;
+    }
+  }, success && ((r) => about(robot, typeof success === 'function' ? success(r) : success)));
 }
 
 export function fmt(value, digits = 3) {

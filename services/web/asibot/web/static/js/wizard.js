@@ -4,10 +4,10 @@
 import { el } from './ui.js';
 
 const STEPS = [
-  { tab: 'joint', title: 'Joint', hint: 'Move the arm joint by joint near the object. Capture a point when the arm is where it should go.' },
+  { tab: 'joint', title: 'Joint', hint: 'Move the arm joint by joint near the object. Touch Capture point when the arm is where it should go.' },
   { tab: 'cartesian', title: 'Cartesian', hint: 'Fine-tune the tool along x, y, z and capture the points of the task (above the object, at it, lifted).' },
-  { tab: 'program', title: 'Program', hint: 'Write the program: New program, then touch the point buttons to add moves. Save, then Run to try it.' },
-  { tab: 'speech', title: 'Speech', hint: 'Type the word or phrase that will launch the task, for example "give me the red can".' },
+  { tab: 'program', title: 'Program', hint: 'Write the program: type a name and touch New program, then touch the points under “Insert at the cursor” to add moves. Save, then Run to try it.' },
+  { tab: 'speech', title: 'Speech', hint: 'Type the word or phrase that will launch the task, for example "give me the red can", and touch Add word.' },
   { tab: 'assigner', title: 'Assigner', hint: 'Make the task: choose the program, its words and an icon, then Save task.' },
   { tab: 'launcher', title: 'Launcher', hint: 'Touch the big button of your task to run it.' },
 ];

@@ -128,7 +128,7 @@ export default {
       el('div', {},
         el('section', { class: 'panel', 'aria-label': 'Messages' },
           el('h2', {}, 'Messages'),
-          el('p', {}, 'Errors stay until you dismiss them. Good news fades unless you point at it, or choose to keep it.'),
+          el('p', {}, 'Errors stay until you press Dismiss. Good news fades unless you point at it, or you choose “Stay until I dismiss them”.'),
           messages.node),
         el('section', { class: 'panel', 'aria-label': 'Settings file' },
           el('h2', {}, 'Settings file'),

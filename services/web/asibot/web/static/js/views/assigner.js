@@ -1,26 +1,30 @@
-// Assigner tab: program + words + icon -> a task, the button the Launcher shows.
+// Assigner tab: program + words + icon -> a task, the button the Launcher shows. The task being
+// made (name, program, words, icon) is kept across tab switches and reloads (keep.js).
 import { api, paths } from '../api.js';
+import { kept, recall, remember, setKept } from '../keep.js';
 import { attempt, el, notify } from '../ui.js';
 
 export default {
   id: 'assigner',
   title: 'Assigner',
   mount(root) {
-    const name = el('input', { type: 'text', 'aria-label': 'Task name', placeholder: 'Give me the red can' });
-    const program = el('select', { 'aria-label': 'Program' });
+    const name = kept('assigner.name', el('input', { type: 'text', 'aria-label': 'Task name', placeholder: 'Give me the red can' }));
+    const program = kept('assigner.program', el('select', { 'aria-label': 'Program' }));
     const words = el('div', { class: 'chips', role: 'group', 'aria-label': 'Words that launch it' });
     const icons = el('div', { class: 'icons', role: 'radiogroup', 'aria-label': 'Icon' });
     const tasks = el('ul', { class: 'points', 'aria-label': 'Tasks' });
     const upload = el('input', { type: 'file', accept: 'image/png,image/jpeg,image/gif,image/webp', 'aria-label': 'Upload an icon' });
-    let icon = null;
-    let chosenWords = new Set();
+    let icon = recall('assigner.icon');
+    let chosenWords = new Set(recall('assigner.words', []));
 
     const pickIcon = (n) => {
       icon = n;
+      remember('assigner.icon', n);
       for (const b of icons.querySelectorAll('button')) b.setAttribute('aria-checked', String(b.dataset.icon === n));
     };
     const toggleWord = (w, b) => {
       if (chosenWords.has(w)) chosenWords.delete(w); else chosenWords.add(w);
+      remember('assigner.words', [...chosenWords]);
       b.setAttribute('aria-pressed', String(chosenWords.has(w)));
     };
     const refresh = async () => {
@@ -28,6 +32,7 @@ export default {
       const keep = program.value;
       program.replaceChildren(...p.programs.map((n) => el('option', { value: n }, n)));
       if (p.programs.includes(keep)) program.value = keep;
+      else kept.restore(program);   // the program chosen before this tab was last shown
       words.replaceChildren(...(w.words.length ? w.words.map((x) => {
         const b = el('button', { type: 'button', 'aria-pressed': String(chosenWords.has(x)) }, x);
         b.addEventListener('click', () => toggleWord(x, b));
@@ -43,7 +48,8 @@ export default {
         el('span', { class: 'pvals' }, `${x.program}.py${x.words.length ? ` · "${x.words.join('", "')}"` : ''}`),
         el('button', {
           type: 'button', 'aria-label': `Edit ${x.name}`, onclick: () => {
-            name.value = x.name; program.value = x.program; chosenWords = new Set(x.words); pickIcon(x.icon); refresh();
+            setKept(name, x.name); setKept(program, x.program); chosenWords = new Set(x.words);
+            remember('assigner.words', [...chosenWords]); pickIcon(x.icon); refresh();
           },
         }, 'Edit'),
         el('button', {

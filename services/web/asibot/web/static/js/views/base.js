@@ -1,8 +1,12 @@
 // Base tab: a mobile robot's map with where it is (and how sure: its particles), what its scan
 // sees and the way it plans; tap the map to send it there, or choose a named place; drive it
-// with the thesis's primitives as large buttons; keep its places.
-import { api, connectedRobots, onChange, paths, state } from '../api.js';
-import { attempt, confirmable, el, notify } from '../ui.js';
+// with the thesis's primitives as large buttons; keep its places. It drives the robot the page
+// commands; while that one has no base, it says which robot it is about and offers to command it
+// (opening the tab never changes the commanded robot).
+import { api, chosenRobot, connectedRobots, onChange, paths, state } from '../api.js';
+import { kept, setKept } from '../keep.js';
+import { offerToCommand } from '../connection.js';
+import { attemptOn, confirmable, el, notify } from '../ui.js';
 
 const COLOURS = { free: [255, 255, 255], occupied: [19, 32, 43], unknown: [201, 209, 216] };
 const PX_PER_CELL = 3;
@@ -133,7 +137,7 @@ function statusText(robot) {
 
 function placesPanel(robotId, onPlaces) {
   const list = el('ul', { class: 'points', 'aria-label': 'Places' });
-  const name = el('input', { type: 'text', 'aria-label': 'Name of the new place', placeholder: 'sofa' });
+  const name = kept(`base.${robotId}.place`, el('input', { type: 'text', 'aria-label': 'Name of the new place', placeholder: 'sofa' }));
   const load = async () => {
     const { places } = await api.get(paths.base.places(robotId));
     onPlaces(places);
@@ -145,20 +149,21 @@ function placesPanel(robotId, onPlaces) {
       el('span', { class: 'pname' }, p.name),
       el('button', {
         type: 'button', class: 'primary', 'aria-label': `Go to ${p.name}`,
-        onclick: () => attempt(() => api.post(paths.base.goto(robotId), { place: p.name }), `On the way to ${p.name}.`),
+        onclick: () => attemptOn(robotId, (id) => api.post(paths.base.goto(id), { place: p.name }), `On the way to ${p.name}.`),
       }, 'Go'),
       el('button', { type: 'button', 'aria-label': `Rename ${p.name}`, onclick: edit }, 'Rename'),
-      confirmable('Remove', { 'aria-label': `Remove ${p.name}` }, () => attempt(async () => {
+      confirmable('Remove', { 'aria-label': `Remove ${p.name}` }, () => attemptOn(robotId, async () => {
         await api.del(paths.base.place(robotId, p.name));
         await load();
       }, `${p.name} removed.`)));
     const edit = () => {
       const input = el('input', { type: 'text', value: p.name, 'aria-label': `New name for ${p.name}` });
-      const save = () => attempt(async () => {
+      const save = () => attemptOn(robotId, async () => {
         await api.post(paths.base.renamePlace(robotId, p.name), { new_name: input.value.trim() });
         await load();
       });
-      input.addEventListener('keydown', (e) => { if (e.key === 'Enter') save(); if (e.key === 'Escape') { e.stopPropagation(); show(); } });
+      // Esc cancels the new name; preventDefault tells the emergency stop's key that it did (estop.js).
+      input.addEventListener('keydown', (e) => { if (e.key === 'Enter') save(); if (e.key === 'Escape') { e.preventDefault(); show(); } });
       li.replaceChildren(input, el('button', { type: 'button', class: 'primary', onclick: save }, 'Save name'),
         el('button', { type: 'button', onclick: show }, 'Cancel'));
       input.focus();
@@ -168,9 +173,9 @@ function placesPanel(robotId, onPlaces) {
   };
   const save = el('button', {
     type: 'button', class: 'primary',
-    onclick: () => attempt(async () => {
+    onclick: () => attemptOn(robotId, async () => {
       const saved = await api.post(paths.base.places(robotId), { name: name.value.trim() });
-      name.value = '';
+      setKept(name, '');
       await load();
       return saved;
     }, (r) => `Saved ${r.name} where the robot stands.`),
@@ -187,10 +192,10 @@ function drivePanel(robotId) {
   const levels = el('p', { class: 'readout', role: 'status' });
   const button = (name) => el('button', {
     type: 'button', class: name === 'stop' ? 'drive drive-stop' : 'drive', dataset: { drive: name },
-    onclick: () => attempt(() => api.post(paths.base.drive(robotId), { name, continuous: name !== 'stop' && keepGoing.getAttribute('aria-pressed') === 'true' })),
+    onclick: () => attemptOn(robotId, (id) => api.post(paths.base.drive(id), { name, continuous: name !== 'stop' && keepGoing.getAttribute('aria-pressed') === 'true' })),
   }, name[0].toUpperCase() + name.slice(1));
   const changes = state.config.base.changes.map((change) => el('button', {
-    type: 'button', onclick: () => attempt(async () => {
+    type: 'button', onclick: () => attemptOn(robotId, async () => {
       const r = await api.post(paths.base.settings(robotId), { change });
       levels.textContent = r.text[0].toUpperCase() + r.text.slice(1);
     }),
@@ -209,10 +214,10 @@ export default {
     const waiting = () => root.replaceChildren(el('section', { class: 'panel' }, el('h2', {}, 'Base'),
       el('p', {}, 'No mobile robot is connected. `asibot up` starts pioneer-sim, the Pioneer P3-AT in the apartment.')));
     const build = (robot) => {
-      const map = new MapView(robot.id, (p) => attempt(() => api.post(paths.base.goto(robot.id), { x: p.x, y: p.y }),
+      const map = new MapView(robot.id, (p) => attemptOn(robot.id, (id) => api.post(paths.base.goto(id), { x: p.x, y: p.y }),
         `On the way to (${p.x.toFixed(1)}, ${p.y.toFixed(1)}).`));
       const status = el('p', { class: 'big nav-status', role: 'status', 'aria-live': 'polite' });
-      const cancel = el('button', { type: 'button', class: 'danger', onclick: () => attempt(() => api.post(paths.base.cancel(robot.id)), 'Canceled.') }, 'Cancel the trip');
+      const cancel = el('button', { type: 'button', class: 'danger', onclick: () => attemptOn(robot.id, (id) => api.post(paths.base.cancel(id)), 'Canceled.') }, 'Cancel the trip');
       const events = el('ul', { class: 'events', 'aria-label': 'What the robot said' });
       const drive = drivePanel(robot.id);
       const places = placesPanel(robot.id, (list) => map.update(map.live, list));
@@ -242,9 +247,22 @@ export default {
       };
       built.update(robot);
     };
+    let offered = null;   // 'robot:commanded' while the tab offers to command a robot with a base
     const update = () => {
-      const robot = bases()[0];
-      if (!robot) { if (built) { built = null; waiting(); } return; }
+      const commanded = chosenRobot();
+      const robot = commanded && commanded.has_base && bases().includes(commanded) ? commanded : null;
+      if (!robot) {
+        const other = bases()[0];
+        const key = other ? `${other.id}:${commanded ? commanded.id : ''}` : '';
+        if (built || key !== offered) {
+          built = null;
+          offered = key;
+          if (other) root.replaceChildren(offerToCommand(other, 'a mobile robot: its map, its places and its driving buttons', commanded));
+          else waiting();
+        }
+        return;
+      }
+      offered = null;
       if (!built || built.id !== robot.id) build(robot);
       else built.update(robot);
     };

@@ -20,7 +20,10 @@ export default {
       el('section', { class: 'panel' },
         el('h2', {}, 'Safety'),
         el('p', {}, 'The red Emergency stop button at the top, or the Esc key, stops every robot and the running program at once. ',
-          'Release it in the Connection Manager; nothing moves again until you ask it to.')));
+          'Release it in the Connection Manager; nothing moves again until you ask it to.'),
+        el('p', { id: 'esc-rule' }, 'The Esc key: one Esc stops. In a text field or the program editor, or when Esc closes something ',
+          '(the editor\'s list of completions, its search box, a name being changed), the first Esc only does that and the ',
+          'button at the top says "Esc again: emergency stop"; the second Esc stops. So two Esc presses in a row always stop.')));
     const upload = el('input', { type: 'file', accept: '.zip,application/zip', 'aria-label': 'Import ASIBOT user files (a zip)' });
     const report = el('div', { role: 'status' });
     upload.addEventListener('change', () => attempt(async () => {
@@ -55,7 +58,7 @@ export default {
     const update = () => {
       const r = chosenRobot();
       status.textContent = r ? `Commanding ${r.id} (${r.simulated ? 'simulated' : 'real'} ${r.arm || 'robot'}).`
-        : 'No robot chosen yet: choose one in the Connection Manager at the top.';
+        : 'No robot commanded yet: press Command beside one in the Connection Manager at the top.';
     };
     return { update };
   },

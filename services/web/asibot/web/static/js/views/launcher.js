@@ -1,7 +1,7 @@
 // Launcher tab: one large button per task (the seed's "Multi-Modal Task Launcher"); the running
 // task is shown with its output and a Stop button.
 import { api, onMessage, paths, state } from '../api.js';
-import { attempt, el, notify } from '../ui.js';
+import { attemptOn, el, notify } from '../ui.js';
 import { outputPanel, stopProgramButton } from './program.js';
 
 export default {
@@ -14,10 +14,11 @@ export default {
       const { tasks } = await api.get(paths.tasks);
       grid.replaceChildren(...(tasks.length ? tasks.map((t) => el('button', {
         type: 'button', class: 'task-button', 'aria-label': `Launch ${t.name}`,
-        onclick: () => attempt(async () => {
-          if (!state.chosen) throw new Error('Choose a robot in the Connection Manager first.');
+        onclick: () => attemptOn(state.chosen, async (robot) => {
           output.clear();
-          return api.post(paths.launchTask(t.name), { robot: state.chosen });
+          const status = await api.post(paths.launchTask(t.name), { robot });
+          output.show(status);
+          return status;
         }, `${t.name}: started.`),
       }, el('img', { src: paths.icon(t.icon), alt: '' }), t.name))
         : [el('p', { class: 'muted' }, 'No tasks yet: make one on the Assigner page (or start the wizard from Home).')]));

@@ -1,5 +1,8 @@
 // Pioneer arm tab: the Katana arm on the Pioneer (pioneer-sim), jogged like the ASIBOT.
-import { choose, connectedRobots, state } from '../api.js';
+// Opening the tab never changes the robot the page commands: while another robot is commanded,
+// the tab says which robot it is about and offers the one button that commands it.
+import { chosenRobot, connectedRobots } from '../api.js';
+import { offerToCommand } from '../connection.js';
 import { el } from '../ui.js';
 import { viewer } from '../viewer3d.js';
 import { cartesianControls } from './cartesian.js';
@@ -13,12 +16,12 @@ export default {
   id: 'pioneer',
   title: 'Pioneer arm',
   mount(root) {
-    let built = null;   // the controls, once a Pioneer with an arm is on the bus
+    let built = null;   // the controls, while the page commands a Pioneer with an arm
+    let shown = null;   // what the tab shows now: '' (waiting), 'offer:<id>:<commanded>' or 'controls:<id>'
     const waiting = () => root.replaceChildren(el('section', { class: 'panel' }, el('h2', {}, 'Pioneer arm'),
       el('p', {}, 'No Pioneer with an arm is connected. `asibot up` starts pioneer-sim, the Pioneer P3-AT with its Katana arm in the apartment.')));
     const build = (robot) => {
-      if (state.chosen !== robot.id) choose(robot.id);
-      const cart = cartesianControls();
+      const cart = cartesianControls('pioneer.cartesian');
       const left = el('div');
       root.replaceChildren(el('p', { class: 'big' }, `This page commands ${robot.id}, the Katana arm on the Pioneer.`),
         el('div', { class: 'columns' }, left,
@@ -26,19 +29,23 @@ export default {
       built = { cart, left, joints: null };
     };
     // The robots may arrive after the tab opens (a page loaded straight on #pioneer).
-    const update = (robot) => {
-      if (!built) {
-        const k = katana();
-        if (!k) return;
-        build(k);
-        return;
+    const update = () => {
+      const k = katana();
+      const commanded = chosenRobot();
+      const mode = !k ? '' : commanded && commanded.id === k.id ? `controls:${k.id}` : `offer:${k.id}:${commanded ? commanded.id : ''}`;
+      if (mode !== shown) {
+        shown = mode;
+        built = null;
+        if (!k) waiting();
+        else if (mode.startsWith('offer:')) root.replaceChildren(offerToCommand(k, 'the Katana arm on the Pioneer', commanded));
+        else build(k);
       }
-      if (!built.joints && robot && robot.joints) { built.joints = jointControls(robot); built.left.replaceChildren(built.joints.panel); }
-      if (built.joints) built.joints.update(robot);
-      built.cart.update(robot);
+      if (!built) return;
+      if (!built.joints && commanded.joints) { built.joints = jointControls(commanded); built.left.replaceChildren(built.joints.panel); }
+      if (built.joints) built.joints.update(commanded);
+      built.cart.update(commanded);
     };
-    waiting();
-    update(null);
+    update();
     return { update };
   },
 };

@@ -9,7 +9,7 @@
 // off (WCAG 2.5.4: Off is the default, and every motion has a button elsewhere).
 import { chosenRobot, onMessage, sendLive, state } from '../api.js';
 import { grip, gripperButtons } from '../jog.js';
-import { el, fmt, notify } from '../ui.js';
+import { about, el, fmt, notify } from '../ui.js';
 
 const prefs = {
   get source() { return localStorage.getItem('asibot.pointer.source') || 'off'; },
@@ -51,7 +51,7 @@ export default {
     const stop = (why) => {
       if (streaming) sendLive({ type: 'release' });
       streaming = false;
-      if (why && why !== lastWhy) notify(why, 'info');
+      if (why && why !== lastWhy) notify(about(state.chosen, why), 'info');
       lastWhy = why || '';
     };
     const deadmanOff = (why) => {
@@ -183,7 +183,7 @@ export default {
       const robot = chosenRobot();
       const axes = state.config.jog.point_axes;
       toolReadout.textContent = robot && robot.point
-        ? `Tool: ${robot.point.map((v, i) => `${axes[i].name} ${fmt(v, axes[i].unit === 'm' ? 3 : 1)} ${axes[i].unit}`).join(', ')}`
+        ? `${robot.id} tool: ${robot.point.map((v, i) => `${axes[i].name} ${fmt(v, axes[i].unit === 'm' ? 3 : 1)} ${axes[i].unit}`).join(', ')}`
         : 'No arm chosen.';
       if (!reading || !robot) { if (streaming) stop(''); return; }
       const fwd = input.forward || pad.forward;

@@ -4,6 +4,7 @@
 // the user says a word: the next phrase said into the microphone becomes a pronunciation of it.
 import { api, onMessage, paths, state } from '../api.js';
 import { listening, onListening, startListening, stopListening } from '../microphone.js';
+import { kept, setKept } from '../keep.js';
 import { attempt, el, notify } from '../ui.js';
 
 const HEARD_KEPT = 8;
@@ -100,7 +101,7 @@ export default {
   title: 'Speech',
   mount(root) {
     const list = el('ul', { class: 'points', 'aria-label': 'Words and phrases' });
-    const word = el('input', { type: 'text', 'aria-label': 'Word or phrase', placeholder: 'give me the red can', maxlength: '80' });
+    const word = kept('speech.word', el('input', { type: 'text', 'aria-label': 'Word or phrase', placeholder: 'give me the red can', maxlength: '80' }));
     const learnNote = el('p', { class: 'muted' });
     const refresh = async () => {
       const { words } = await api.get(paths.words);
@@ -113,18 +114,18 @@ export default {
     };
     const add = () => attempt(async () => {
       const r = await api.post(paths.words, { text: word.value.trim() });
-      word.value = '';
+      setKept(word, '');
       await refresh();
       return r;
-    }, (r) => `"${r.word}" recorded.`);
+    }, (r) => `"${r.word}" added.`);
     word.addEventListener('keydown', (e) => { if (e.key === 'Enter') add(); });
     const mic = micPanel();
     root.replaceChildren(el('div', { class: 'columns' },
       el('section', { class: 'panel', 'aria-label': 'Speech' },
         el('h2', {}, 'Words and phrases'),
-        el('p', {}, 'Type the word or phrase a person will say to launch a task. Give it to a task on the Assigner page; then say it with the microphone on to check that it is heard.'),
-        el('p', {}, 'A name, a made-up word, or a word said in your own way: press “Record by saying it” and say it once or twice; the robot then listens for the way you say it.'),
-        el('div', { class: 'row' }, word, el('button', { type: 'button', class: 'primary', onclick: add }, 'Record word')),
+        el('p', {}, 'Type the word or phrase a person will say to launch a task, and press “Add word”. Give it to a task on the Assigner page; then press “Listen to the microphone” and say it to check that it is heard.'),
+        el('p', {}, 'A name, a made-up word, or a word said in your own way: press “Record by saying it” beside it in the list and say it once or twice; the robot then listens for the way you say it.'),
+        el('div', { class: 'row' }, word, el('button', { type: 'button', class: 'primary', onclick: add }, 'Add word')),
         list, learnNote),
       mic.panel));
     refresh().catch((e) => notify(e.message));

@@ -11,7 +11,7 @@ export default {
     let shown = null;
     const load = async (robot) => {
       shown = robot ? robot.id : null;
-      if (!robot) { grid.replaceChildren(el('p', { class: 'muted' }, 'Choose a robot in the Connection Manager.')); return; }
+      if (!robot) { grid.replaceChildren(el('p', { class: 'muted' }, 'No robot commanded: press Command beside one in the Connection Manager at the top.')); return; }
       heading.textContent = `Cameras of ${robot.id}`;
       const { cameras } = await api.get(paths.robot.cameras(robot.id));
       grid.replaceChildren(...(cameras.length ? cameras.map((name) => el('figure', {},
