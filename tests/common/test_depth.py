@@ -160,3 +160,19 @@ def test_a_fit_with_too_few_marks_or_marks_in_a_line_is_refused():
         depth.fit_pose(line, line + 0.5)
     with pytest.raises(DepthError, match="not a number"):
         depth.fit_pose([[0, 0, 1], [0.2, 0, 1], [0, float("nan"), 1]], [[0, 0, 1], [0.2, 0, 1], [0, 0.2, 1]])
+
+
+@pytest.mark.parametrize("rgb, name", [((204, 13, 13), "red"), ((25, 153, 51), "green"), ((102, 153, 242), "blue"),
+                                       ((242, 140, 25), "orange"), ((240, 240, 235), "white"), ((120, 120, 125), "grey"),
+                                       ((20, 20, 22), "black"), ((230, 220, 40), "yellow"), ((150, 40, 200), "purple")])
+def test_a_things_colour_is_named_from_its_pixels(rgb, name):
+    picture = np.zeros((4, 6, 3), np.uint8)
+    region = np.zeros((4, 6), bool)
+    region[1:3, 2:5] = True
+    picture[region] = rgb
+    picture[~region] = (0, 0, 255)          # what is around it does not count
+    assert depth.colour_name(picture, region) == name
+
+
+def test_no_colour_is_named_from_a_picture_of_another_size():
+    assert depth.colour_name(np.zeros((8, 8, 3), np.uint8), np.ones((4, 4), bool)) is None

@@ -14,6 +14,7 @@ import pytest
 
 from asibot import keys
 from asibot.messages import ArmState
+from asibot.poses import POINT_AXIS_MEANINGS
 from asibot.testing import wait_until
 
 from .conftest import screenshot
@@ -199,6 +200,9 @@ def test_the_gripper_says_how_it_is_and_the_kitchen_is_put_back_from_the_page(pa
     assert max(abs(a - b) for a, b in zip(can_position(kitchen), start)) < 0.01
 
     page.goto(page.url.split("#")[0] + "#cartesian")
+    # rot(y') and rot(z'') say what they turn, beside their jog buttons (the server's words).
+    for meaning in POINT_AXIS_MEANINGS.values():
+        page.locator(".jog-grid .meaning").get_by_text(meaning, exact=True).wait_for(timeout=5000)
     page.get_by_role("button", name="Open gripper").click()
     page.get_by_text("Gripper: open (8.0 cm)").wait_for(timeout=10000)
     page.get_by_role("button", name="Close gripper").click()

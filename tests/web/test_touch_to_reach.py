@@ -81,7 +81,7 @@ def test_touch_the_can_go_above_it_and_the_wall_is_out_of_reach(browser, kitchen
         touched = click_pixel(page, *pixel_of(info, side))
         says = page.locator(".touch-says")
         says.wait_for(timeout=10000)
-        assert "an object 12 cm tall, 0.50 m away" in says.inner_text(), says.inner_text()
+        assert "a red object 12 cm tall, 0.50 m away" in says.inner_text(), says.inner_text()
         above = touched["above"]
         assert above["point"][:2] == pytest.approx(CAN[:2], abs=0.015) and above["joints"]
         page.locator(".touch-result button[data-offer=above]").click()

@@ -100,7 +100,8 @@ def test_touching_the_can_offers_above_it_and_reach_it_with_their_joints(web, ca
     reply = api.post(f"{BASE}/touch", json={"u": u, "v": v})
     assert reply.status_code == 200, reply.text
     touched = reply.json()
-    assert touched["says"] == "an object 12 cm tall, 0.50 m away"
+    assert touched["says"] == "a red object 12 cm tall, 0.50 m away" and touched["colour"] == "red"
+    assert touched["name"] == "red-object-1"
     assert touched["found"]["kind"] == "object" and touched["found"]["top"] == pytest.approx(CAN_TOP, abs=0.005)
     above, reach = touched["above"], touched["reach"]
     fingers = spec.finger_length

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import collections
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import cv2
@@ -178,6 +178,7 @@ class Touched:
     width: float                           # its width across the line of sight
     support: float | None                  # the height of the surface it stands on, if one was seen
     pixels: int                            # how many pixels it covers
+    region: np.ndarray | None = field(default=None, repr=False, compare=False)   # its pixels (a mask)
 
     def as_json(self) -> dict:
         r = lambda v: round(float(v), 4)   # noqa: E731
@@ -259,8 +260,32 @@ def object_at(depth: np.ndarray, info: CameraInfo, camera_pose: np.ndarray, u: f
     lid = pts[thing & (heights > top - ABOVE_SUPPORT)]
     centre_xy, width = _centre(found[:, :2], lid[:, :2], np.asarray(camera_pose)[:2, 3], touched[:2])
     centre = (float(centre_xy[0]), float(centre_xy[1]), (top + bottom) / 2)
+    region = np.zeros(depth.shape, bool)
+    region[r0:r1, c0:c1] = thing
     return Touched(_xyz(touched), "object", top, centre, top - bottom, width, support,
-                   int(thing.sum()))
+                   int(thing.sum()), region)
+
+
+#: Colour names by hue (deg), the upper end of each range; red wraps round 360.
+HUES = ((15, "red"), (40, "orange"), (70, "yellow"), (170, "green"), (260, "blue"), (335, "purple"), (360, "red"))
+
+
+def colour_name(rgb: np.ndarray, region: np.ndarray) -> str | None:
+    """The everyday name of a thing's colour ("red", "blue", "white") from its pixels of an RGB
+    picture the size of the depth image; None when the picture does not match the depth."""
+    if rgb.shape[:2] != region.shape or not region.any():
+        return None
+    r, g, b = (rgb[region].astype(np.float64).mean(axis=0) / 255.0)[:3]
+    high, low = max(r, g, b), min(r, g, b)
+    if high - low < 0.15 * max(high, 1e-6) or high - low < 0.06:      # hardly any colour
+        return "white" if high > 0.75 else "black" if high < 0.25 else "grey"
+    if high == r:
+        hue = (60 * (g - b) / (high - low)) % 360
+    elif high == g:
+        hue = 60 * (b - r) / (high - low) + 120
+    else:
+        hue = 60 * (r - g) / (high - low) + 240
+    return next(name for end, name in HUES if hue < end)
 
 
 def _xyz(p: np.ndarray) -> tuple[float, float, float]:

@@ -47,7 +47,11 @@ async def cloud(robot: RobotId, name: CameraName, request: Request) -> Response:
              summary="what is at a spot of the camera's picture, and the poses that go above it and reach it")
 async def touch(robot: RobotId, name: CameraName, body: Spot, request: Request) -> dict:
     web = web_of(request)
-    return await off_loop(web.world.touch, known(web, robot), name, body.u, body.v)
+    touched = await off_loop(web.world.touch, known(web, robot), name, body.u, body.v)
+    # The name a point kept from it is given unless the person types one: "red-object-1".
+    thing = f"{touched['colour']} object" if touched["colour"] and touched["found"]["kind"] == "object" else ""
+    touched["name"] = web.data.suggest_point_name(touched["reach"]["point"], place=thing)
+    return touched
 
 
 # --- calibration ---------------------------------------------------------------------------------

@@ -151,13 +151,7 @@ class World:
             cached = self._clouds.get((robot, name))
         if cached is not None and cached[0] == stamp:
             return cached[1], cached[2]
-        picture = self.cameras.newest(robot, name)
-        rgb = None
-        if picture is not None:
-            try:
-                rgb = depth.decode_rgb(picture.jpeg)
-            except depth.DepthError:
-                rgb = None       # a broken frame: grey points this once
+        rgb = self._rgb(robot, name)
         try:
             xyz, colours = depth.cloud(image, rgb, info, pose)
         except depth.DepthError as exc:
@@ -166,6 +160,17 @@ class World:
         with self._lock:
             self._clouds[(robot, name)] = (stamp, len(xyz), body)
         return len(xyz), body
+
+    def _rgb(self, robot: str, name: str) -> np.ndarray | None:
+        """The camera's newest colour picture, decoded; None without one (or a broken frame:
+        grey points, no colour name, this once)."""
+        picture = self.cameras.newest(robot, name)
+        if picture is None:
+            return None
+        try:
+            return depth.decode_rgb(picture.jpeg)
+        except depth.DepthError:
+            return None
 
     # --- touch to reach --------------------------------------------------------------------
     def touch(self, robot: str, name: str, u: float, v: float) -> dict[str, Any]:
@@ -190,7 +195,9 @@ class World:
             reach_z = found.top + SURFACE_CLEARANCE + fingers
         above = [x, y, found.top + ABOVE_HEIGHT + fingers, *TOOL_DOWN]
         reach = [x, y, reach_z, *TOOL_DOWN]
-        return {"found": found.as_json(), "says": describe(found),
+        rgb = self._rgb(robot, name)
+        colour = depth.colour_name(rgb, found.region) if rgb is not None and found.region is not None else None
+        return {"found": found.as_json(), "colour": colour, "says": describe(found, colour),
                 "above": self._candidate(robot, above), "reach": self._candidate(robot, reach),
                 "names": spec.joint_names}
 
@@ -262,10 +269,11 @@ def fingertips(point: list[float], spec: robots.RobotSpec) -> list[float]:
     return [float(c) for c in np.asarray(point[:3]) + rot[:, 2] * spec.fingertip_reach]
 
 
-def describe(found: depth.Touched) -> str:
-    """What was touched, in the user's words: "an object 12 cm tall, 0.50 m away" (from the arm)."""
+def describe(found: depth.Touched, colour: str | None = None) -> str:
+    """What was touched, in the user's words: "a red object 12 cm tall, 0.50 m away" (from the arm)."""
     x, y = (found.centre if found.kind == "object" else found.surface)[:2]
     away = math.hypot(x, y)
     if found.kind == "object":
-        return f"an object {found.height * 100:.0f} cm tall, {away:.2f} m away"
+        article = "an" if colour is None or colour[0] in "aeiou" else "a"
+        return f"{article} {colour + ' ' if colour else ''}object {found.height * 100:.0f} cm tall, {away:.2f} m away"
     return f"a flat surface {away:.2f} m away"

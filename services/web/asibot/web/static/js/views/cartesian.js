@@ -96,12 +96,12 @@ function touchResult(touched) {
         }, 'Move'),
         el('button', { type: 'button', onclick: () => { viewer().showGhost(null); confirm.replaceChildren(); } }, 'Cancel')));
   };
-  const name = el('input', { type: 'text', 'aria-label': 'Name of the kept point', placeholder: 'suggested when empty' });
+  const name = el('input', { type: 'text', 'aria-label': 'Name of the kept point', placeholder: touched.name });
   const keepIt = el('button', {
     type: 'button',
     onclick: () => attempt(async () => {
       const body = { values: touched.reach.point };
-      if (name.value.trim()) body.name = name.value.trim();
+      body.name = name.value.trim() || touched.name;
       const p = await api.post(paths.points, body);
       name.value = '';
       await loadPoints();
@@ -114,7 +114,7 @@ function touchResult(touched) {
     type: 'button', class: 'primary', hidden: !touched.reach.joints,
     onclick: () => attempt(async () => {
       const body = { values: touched.reach.point };
-      if (name.value.trim()) body.name = name.value.trim();
+      body.name = name.value.trim() || touched.name;
       const point = await api.post(paths.points, body);
       const program = await api.post(paths.stepPrograms, { template: 'pick_it_up', point: point.name });
       remember('assigner.program', program.name);
