@@ -229,7 +229,7 @@ def switch_rows(page, n: int) -> list[tuple]:
     """One-switch step scanning on the Launcher: a tap of Space to the ring moved onto the next
     element (its step changed in the page), beside the page's frame time."""
     page.evaluate("(s) => localStorage.setItem('asibot.access', JSON.stringify(s))",
-                  {"format": "asibot-access-settings", "version": 1, "enabled": True})
+                  {"format": "asibot-access-settings", "version": 1, "enabled": True, "doubleTapStop": False})
     # The scanner's own capturing listener swallows the switch: ours must come first, so it is
     # installed before the page's scripts run.
     page.add_init_script("""window.__taps = [];

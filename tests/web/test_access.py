@@ -19,7 +19,9 @@ import pytest
 from asibot import keys
 from asibot.testing import wait_until
 
+from . import switch
 from .conftest import ROOT, http, screenshot
+from .switch import choose, hold, moves, ringed, tap, tap_until, wait_ringed
 from .test_browser import ArmWatch
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
@@ -29,7 +31,6 @@ AXE = ROOT / "services" / "web" / "frontend" / "node_modules" / "axe-core" / "ax
 WCAG = ["wcag2a", "wcag2aa", "wcag21a", "wcag21aa", "wcag22aa"]
 TASK, PROGRAM, MARK = "Scan wave", "scan_wave", "waved by one switch"
 ESTOP = "Emergency stop Esc"
-SETTINGS_FORMAT = {"format": "asibot-access-settings", "version": 1}
 
 # What each view shows once it has loaded what it lists.
 READY = {
@@ -71,65 +72,7 @@ def go(page, view: str) -> None:
 
 
 def with_settings(page, view: str, **settings) -> None:
-    """Load `view` with these access settings in the browser's storage (as an imported file does)."""
-    page.evaluate("(s) => localStorage.setItem('asibot.access', JSON.stringify(s))", {**SETTINGS_FORMAT, **settings})
-    page.goto(page.url.split("#")[0] + "#" + view)
-    page.reload()
-    page.wait_for_selector("body[data-ready=true]")
-    page.wait_for_selector(f".robot-card[data-robot={ROBOT}]", timeout=15000)
-    page.wait_for_selector(READY[view], timeout=15000)
-
-
-# --- scanning from the test's side: Space, and what the ring is on ---------------------------
-RINGED = """() => [...document.querySelectorAll('[data-scanned]')]
-    .map((n) => (n.getAttribute('aria-label') || n.innerText).replace(/\\s+/g, ' ').trim())"""
-
-
-def ringed(page) -> list[str]:
-    return page.evaluate(RINGED)
-
-
-def moves(page) -> str:
-    return page.evaluate("document.getElementById('scan-ring').dataset.step || '0'")
-
-
-def tap(page) -> None:
-    """A short press of Space: the ring moves on (or scanning starts)."""
-    before = moves(page)
-    page.keyboard.press("Space")
-    page.wait_for_function("(s) => document.getElementById('scan-ring').dataset.step !== s", arg=before, timeout=5000)
-
-
-def hold(page) -> None:
-    """Space held until the page selects (400 ms by default), then let go."""
-    before = moves(page)
-    page.keyboard.down("Space")
-    page.wait_for_function("""(s) => { const r = document.getElementById('scan-ring');
-        return r.dataset.step !== s || r.classList.contains('latched'); }""", arg=before, timeout=5000)
-    page.keyboard.up("Space")
-
-
-def tap_until(page, wanted, limit: int = 80) -> list[str]:
-    for _ in range(limit):
-        now = ringed(page)
-        if wanted(now):
-            return now
-        tap(page)
-    raise AssertionError(f"the ring never got there; it is on {ringed(page)}")
-
-
-def choose(page, name: str) -> None:
-    """Step scanning with one switch: tap to the group or row holding `name`, hold to open it,
-    and so on down (a group of many controls opens into rows), until the ring is on it; hold."""
-    now = tap_until(page, lambda r: name in r)
-    while len(now) > 1:
-        hold(page)
-        now = tap_until(page, lambda r: name in r)
-    hold(page)
-
-
-def wait_ringed(page, js_test: str, timeout: float = 30000) -> None:
-    page.wait_for_function(f"() => ({js_test})(({RINGED})())", timeout=timeout)
+    switch.with_settings(page, "#" + view, READY[view], **settings)
 
 
 def last_run(kitchen) -> dict:
@@ -253,6 +196,109 @@ def test_after_any_select_the_emergency_stop_is_one_step_away(page, kitchen, rel
     wait_until(lambda: estop_engaged(kitchen), timeout=5)
     tap_until(page, lambda r: "Joint 1 plus" in r)                    # the view's jogging panel, a group
     screenshot(page, "scan-group-joint")
+
+
+# --- few presses (issue 30): Home mode, Back, the stop in two presses, Release all ------------
+def view_top(page) -> float:
+    return page.evaluate("document.getElementById('view').getBoundingClientRect().top + scrollY")
+
+
+def test_home_mode_launches_the_persons_first_task_in_three_presses_and_shows_it(page, kitchen, task):
+    http(kitchen, "PUT", "api/favourites/order", {"order": [f"task:{TASK}"]})       # the carer's order
+    try:
+        with_settings(page, "home", enabled=True, scope="home", doubleTapStop=True)
+        top = view_top(page)
+        presses = switch.Presses(page)
+        presses.start()
+        assert ringed(page) == [ESTOP], "scanning starts on the Emergency stop"
+        assert view_top(page) == top, "the page jumped when scanning started"
+        presses.to(f"Launch {TASK}")
+        assert presses.count == 3
+        wait_until(lambda: ran_the_task(kitchen), timeout=30, message="the task did not run")
+        now = page.locator("#for-me .now")
+        now.get_by_text(f"{TASK}: finished.").wait_for(timeout=30000)         # in words, where the person is
+        assert now.locator("img.now-camera").get_attribute("src").endswith(".mjpg")   # and the robot's camera
+        assert ringed(page) == [ESTOP], "after the launch the ring is on the stop, not on a Stop button"
+        screenshot(page, "switch-home-task-launched")
+    finally:
+        http(kitchen, "PUT", "api/favourites/order", {"order": []})
+
+
+def test_two_quick_taps_stop_every_robot_from_inside_a_row_and_release_all_comes_next(page, kitchen, released):
+    with_settings(page, "joint", enabled=True, doubleTapStop=True)
+    top = view_top(page)
+    walk = switch.Presses(page)                                        # at a person's pace: taps apart
+    walk.start()
+    walk.until(lambda r: "Joint 1 plus" in r)
+    walk.hold()                                                        # into a row of the jog grid
+    assert switch.ring_kind(page) == "control" and ringed(page) != [ESTOP]
+    presses = switch.Presses(page)
+    presses.quick_taps()
+    wait_until(lambda: estop_engaged(kitchen), timeout=5, message="two quick taps did not stop")
+    wait_ringed(page, f"(r) => r.length === 1 && r[0] === '{ESTOP}'")
+    # The stop says so in red, for as long as it lasts, and nothing on the page jumped.
+    page.wait_for_selector("#release-all[data-idle=false]")
+    assert page.locator("header.top").get_attribute("class").split() == ["top", "stopped"]
+    assert page.locator("#notice").get_attribute("class") == "notice stop"
+    assert view_top(page) == top
+    screenshot(page, "switch-stopped-release-all")
+    presses.to("Release all emergency stops")
+    wait_until(lambda: not estop_engaged(kitchen), timeout=5, message="Release all did not release")
+    assert presses.count == 4                                          # 2 to stop, 2 to release
+    page.wait_for_selector("#release-all[data-idle=true]", state="attached")
+    page.locator("#notice").wait_for(state="hidden")                   # the stop's news is over
+
+
+def test_every_opened_row_ends_with_back_and_the_tab_row_starts_after_the_shown_tab(page):
+    with_settings(page, "cartesian", enabled=True)
+    tabs = page.evaluate("[...document.querySelectorAll('#tabs [role=tab]')].map((t) => t.innerText)")
+    tap(page)
+    row = tap_until(page, lambda r: "Cartesian" in r and set(r) <= set(tabs))   # the (first) row of tabs
+    hold(page)
+    assert ringed(page) == [row[row.index("Cartesian") + 1]], "the tab row starts after the shown tab"
+    for _ in range(len(row) - row.index("Cartesian") - 1):            # to the row's end ...
+        tap(page)
+    assert switch.ring_kind(page) == "back" and ringed(page) == row    # ... then Back, around the row
+    assert switch.ring_label(page) == "Back: leave this row"
+    hold(page)
+    assert switch.ring_kind(page) == "group" and ringed(page) == row   # out, on the row again
+    assert page.evaluate("location.hash") == "#cartesian", "Back changed nothing"
+
+
+def test_a_long_hold_stops_every_robot_when_the_person_chose_it(page, kitchen, released):
+    with_settings(page, "joint", enabled=True, holdStopMs=1500)
+    tap(page)
+    tap(page)
+    page.keyboard.down("Space")
+    try:
+        wait_until(lambda: estop_engaged(kitchen), timeout=5, message="a long hold did not stop")
+    finally:
+        page.keyboard.up("Space")
+
+
+def test_switch_access_is_found_on_home_and_turned_on_in_one_action(page):
+    page.evaluate("localStorage.removeItem('asibot.access')")
+    page.reload()
+    page.wait_for_selector("body[data-ready=true]")
+    go(page, "home")
+    panel = page.get_by_role("region", name="Switch access")
+    assert "two quick taps stop every robot" in panel.inner_text()
+    panel.get_by_role("button", name="Turn switch scanning on").click()  # one action
+    assert (stored(page)["enabled"], stored(page)["scope"]) == (True, "home")
+    page.reload()                                                      # the person's setting stays
+    page.wait_for_selector("body[data-ready=true]")
+    go(page, "home")
+    assert page.locator("#scan-state").inner_text().startswith("Switch scanning is on")
+    panel.get_by_role("button", name="Turn switch scanning off").click()
+    assert stored(page)["enabled"] is False
+
+
+def test_the_emergency_stop_stays_on_screen_however_far_the_page_scrolls(page):
+    go(page, "access")
+    page.evaluate("window.scrollTo(0, document.body.scrollHeight)")
+    page.wait_for_function("scrollY > 300")
+    box = page.locator("#estop").bounding_box()
+    assert 0 <= box["y"] and box["y"] + box["height"] <= 200, box
 
 
 @pytest.mark.parametrize("stop_by", ["switch", "window blur"])

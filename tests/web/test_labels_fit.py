@@ -233,14 +233,14 @@ def walk(page, size: str, found: list[dict], shots: bool = True) -> None:
     # The emergency stop: its message with Dismiss, both cards stopped with Release buttons.
     go(page, "home", TABS["home"])
     page.locator("#estop").click()
-    page.wait_for_function("document.querySelectorAll('.robot-card .lamp.alarm').length === 2", timeout=15000)
+    page.wait_for_function("document.querySelectorAll('.robot-card .lamp.alarm:not(.away)').length === 2", timeout=15000)
     page.locator("#notice").get_by_role("button", name="Dismiss").wait_for(timeout=10000)
     look("home, both robots stopped, a message", "notice")
     go(page, "joint", TABS["joint"])
     look("joint, both robots stopped, a message")
     for robot in ROBOTS:
         page.get_by_role("button", name=f"Release emergency stop of {robot}").click()
-    page.wait_for_function("document.querySelectorAll('.robot-card .lamp.alarm').length === 0", timeout=15000)
+    page.wait_for_function("document.querySelectorAll('.robot-card .lamp.alarm:not(.away)').length === 0", timeout=15000)
     page.locator("#notice").get_by_role("button", name="Dismiss").click()
     page.wait_for_selector("#notice", state="hidden", timeout=5000)
     # A long error (the page's own notify(), as a refusal shows it): it wraps, Dismiss stays whole.

@@ -24,7 +24,7 @@ ROBOT = "asibot-sim"
 #: A body every route that takes one could accept (a step, a move, a program, a goal ...).
 BODY = {"space": "joint", "axis": 0, "direction": 1, "level": 5, "kind": "movj", "values": [60, 10, 10, 10, 0],
         "joints": True, "name": "evil", "text": "open('/tmp/evil', 'w')\n", "close": True, "place": "fridge",
-        "u": 160, "v": 120, "steps": [], "template": "empty"}
+        "u": 160, "v": 120, "steps": [], "template": "empty", "order": ["task:evil"]}
 #: The routes of programs made of steps (api_steps.py), which openapi.json lists with the rest.
 STEPS_ROUTES = [["PUT", "/api/programs/evil/steps"], ["POST", "/api/programs/evil/steps/preview"],
                 ["POST", "/api/programs/evil/steps/template"], ["POST", "/api/step-programs"]]
@@ -51,7 +51,7 @@ async function attack(target, routes, body) {
   for (const path of ['/', '/api/robots', '/api/programs', '/api/export.zip', '/api/client-reference',
                       '/api/robots/asibot-sim/depth-cameras', '/api/robots/asibot-sim/cameras/kitchen/cloud',
                       '/api/robots/asibot-sim/cameras/kitchen/calibration',
-                      '/api/programs/evil/steps']) {
+                      '/api/programs/evil/steps', '/api/favourites']) {
     try { reads[path] = await (await fetch(target + path)).text(); } catch (e) { reads[path] = null; }
   }
   const socket = await new Promise((done) => {
@@ -116,7 +116,7 @@ def test_a_page_on_another_origin_can_do_nothing(kitchen, attacker):
     for route in (["POST", f"/api/robots/{ROBOT}/cameras/evil/touch"], ["POST", f"/api/robots/{ROBOT}/cameras/evil/calibration/marks"],
                   ["POST", f"/api/robots/{ROBOT}/cameras/evil/calibration/spot"],
                   ["POST", f"/api/robots/{ROBOT}/cameras/evil/calibration/solve"], ["DELETE", f"/api/robots/{ROBOT}/cameras/evil/calibration"],
-                  ["POST", "/api/points"]):
+                  ["POST", "/api/points"], ["PUT", "/api/favourites/order"], ["POST", "/api/release"]):
         assert route in routes, route
     assert all(r in routes for r in STEPS_ROUTES), routes
     before = joints(kitchen)
@@ -147,6 +147,7 @@ def test_a_page_on_another_origin_can_do_nothing(kitchen, attacker):
     status, points = kitchen.web("GET", "/api/points")
     assert "evil" not in [p["name"] for p in points["points"]]
     assert not (kitchen.data / "evil.steps.json").exists()
+    assert not (kitchen.data / "favourites.json").exists()      # no order was set, no use counted
 
 
 def test_a_rebound_dns_name_gets_nothing(kitchen):

@@ -10,7 +10,8 @@ from asibot import keys
 from asibot.messages import ArmState, Pose2D
 from asibot.testing import Inbox, wait_until
 
-from .conftest import screenshot
+from . import switch
+from .conftest import fresh_page, screenshot
 from .test_access import APARTMENT_VIEWS, READY, axe
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
@@ -144,6 +145,33 @@ def test_bad_base_requests_get_a_sentence_and_nothing_moves(apartment, path, bod
     n = len(truth)
     wait_until(lambda: len(truth) >= n + 10, timeout=5)     # half a second of truth after the refusal
     assert all(math.hypot(p.x - before.x, p.y - before.y) < 0.01 for p in truth.all()[n:])
+
+
+def test_the_fridge_is_a_few_presses_from_home_and_the_trip_is_shown_on_the_map(browser, apartment):
+    """One switch (Space), Home mode: Go to fridge among the person's places, the trip on a map
+    with its state in words where the person is, and Cancel the trip reached by the switch."""
+    with fresh_page(browser, apartment.web_url, robots=("pioneer-sim",), size=(1280, 800)) as page:
+        switch.with_settings(page, "#home", "#for-me .favourite", robot="pioneer-sim", enabled=True, scope="home")
+        presses = switch.Presses(page)
+        presses.start()
+        presses.to("Go to fridge")
+        assert presses.count <= 8, presses.count
+        now = page.locator("#for-me .now")
+        now.locator("canvas.map").wait_for()
+        wait_until(lambda: (_nav(apartment)["status"] or {}).get("state") == "active", timeout=10,
+                   message="the trip did not start")
+        page.wait_for_function("document.querySelector('#for-me .now-words').innerText.includes('fridge')")
+        assert switch.ringed(page) == ["Emergency stop Esc"], "after Go the ring is on the stop, not on Cancel"
+        screenshot(page, "switch-home-trip")
+        presses.to("Cancel the trip")
+        wait_until(lambda: (_nav(apartment)["status"] or {}).get("state") != "active", timeout=10,
+                   message="the trip was not canceled")
+
+
+def _nav(stack) -> dict:
+    """The Pioneer's nav, as the page's server sees it."""
+    status, robot = stack.web("GET", "/api/robots/pioneer-sim")
+    return robot.get("nav") or {"status": None}
 
 
 # axe on the apartment's pages, here where the apartment runs anyway (test_access has the kitchen's).

@@ -144,6 +144,15 @@ async def release(robot: RobotId, request: Request) -> dict:
     return {"engaged": False}
 
 
+@router.post("/release", summary="release the emergency stop of every connected robot that has it engaged")
+async def release_all(request: Request) -> dict:
+    web = web_of(request)
+    engaged = [view["id"] for view in web.fleet.views() if view["estop"]["engaged"]]
+    for robot in engaged:
+        await off_loop(web.motion.release, robot)
+    return {"robots": engaged}
+
+
 @router.post("/robots/{robot}/reset_fault", summary="ask the driver to clear a fault")
 async def reset_fault(robot: RobotId, request: Request) -> dict:
     web = web_of(request)

@@ -13,6 +13,7 @@ import asyncio
 import contextlib
 import json
 import logging
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -27,7 +28,7 @@ from asibot.local_http import Callers
 from asibot.web import errors, guard, lan, page_messages
 from asibot.web.api_files import ICON_LIMIT, IMPORT_LIMIT
 from asibot.web.api_files import router as files_router
-from asibot.web import api_base
+from asibot.web import api_base, api_favourites
 from asibot.web.api_steps import router as steps_router
 from asibot.web.api_robots import router as robots_router
 from asibot.web.api_world import router as world_router
@@ -42,7 +43,9 @@ from asibot.web.userdata import UserData
 from asibot.web.voice_relay import MicError, VoiceRelay
 from asibot.web.world import World
 
-STATIC = Path(str(resources.files("asibot.web") / "static"))
+#: The page's files; ASIBOT_WEB_STATIC serves another copy of them (a page being changed, or an
+#: older page to compare with: bench/bench_switch.py measures today's page beside the last one).
+STATIC = Path(os.environ.get("ASIBOT_WEB_STATIC") or str(resources.files("asibot.web") / "static"))
 #: The line of index.html after which the page's session token is written.
 CHARSET = '<meta charset="utf-8">'
 #: Largest request body, bytes; uploads have their own, larger limits.
@@ -137,6 +140,7 @@ def create_app(web: Web) -> guard.PageGuard:
     app.include_router(world_router)
     app.include_router(steps_router)
     app.include_router(api_base.router)
+    app.include_router(api_favourites.router)
 
     @app.get("/api/voice", summary="the voice service's settings (ask yes first before a task heard starts)")
     async def voice_settings() -> dict:

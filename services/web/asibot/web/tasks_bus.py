@@ -20,6 +20,7 @@ from asibot.messages import Event
 from asibot.verbs import Field, Text, Verb
 from asibot.web.runner import ProgramRunner, RunResult
 from asibot.web.userdata import MAX_NAME, UserData, UserDataError
+from asibot.web.userdata.favourites import task_key
 
 log = logging.getLogger("asibot.web.tasks")
 
@@ -58,6 +59,7 @@ class TaskDesk:
         except RuntimeError as exc:
             raise RpcError("busy", f"{str(exc)[:1].upper()}{str(exc)[1:]}.") from None
         self.tell(robot, "info", "task_started", f"{task.name}: started")
+        self.data.favourites.used(task_key(task.name))
         return {"task": task.name, "program": task.program, "robot": robot}
 
     def finished(self, result: RunResult) -> None:

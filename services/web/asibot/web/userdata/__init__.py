@@ -8,6 +8,7 @@ ASIBOT user's folder works as it is:
     <program>.py        the user's programs
     <program>.steps.json  the steps of a program made without Python (steps.py), beside it
     <task>.task         3 lines: program (no .py), words (several joined by ";"), icon file name
+    favourites.json     how often each task and place was used, and the carer's order of them
     icons/              uploaded icons (PNG, JPEG, GIF, WebP)
     .versions/<prog>/   previous versions of each program, so a bad save can be undone
     .trash/             deleted programs and tasks
@@ -31,6 +32,7 @@ from typing import Callable, Concatenate, ParamSpec, TypeVar
 from asibot.files import data_dir
 from asibot.web.userdata import seed
 from asibot.web.userdata.errors import AlreadyExists, NotFound, UserDataError
+from asibot.web.userdata.favourites import Favourites
 from asibot.web.userdata.folder import Folder
 from asibot.web.userdata.icons import MAX_ICON_BYTES, SHIPPED_ICONS, Icon, Icons, check_icon_name
 from asibot.web.userdata.names import MAX_NAME, quote
@@ -78,6 +80,7 @@ class UserData:
         self.word_file = Words(self.folder)
         self.program_files = Programs(self.folder)
         self.task_files = Tasks(self.folder)
+        self.favourites = Favourites(self.folder)
         self.icon_files = Icons(self.folder)
         #: The steps of programs made without Python; its methods take the folder's lock.
         self.steps = ProgramSteps(self.folder, self.point_file, self.program_files)

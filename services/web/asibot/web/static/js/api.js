@@ -37,6 +37,9 @@ const at = (...parts) => `/api/${parts.map((p) => encodeURIComponent(p)).join('/
 export const paths = {
   config: at('config'),
   estop: at('estop'),
+  releaseAll: at('release'),
+  favourites: at('favourites'),
+  favouritesOrder: at('favourites', 'order'),
   phone: at('phone'),
   phoneQr: at('phone', 'qr.png'),
   voice: at('voice'),

@@ -8,27 +8,22 @@ function lamp(text, cls, title) {
   return el('span', { class: `lamp ${cls}`, title }, text);
 }
 
+// Something that comes and goes in a card (STOPPED, Release, a fault) keeps its room while it is
+// away: nothing in the bar moves when a robot stops or is released.
+function when(on, node) {
+  if (!on) { node.classList.add('away'); node.setAttribute('aria-hidden', 'true'); if (node.tagName === 'BUTTON') node.disabled = true; }
+  return node;
+}
+
 function card(robot) {
   const chosen = robot.id === state.chosen;
+  const engaged = robot.estop.engaged;
   const lamps = el('span', { class: 'lamps' },
     lamp('Driver', robot.driver ? 'on' : 'off', robot.driver ? 'driver alive' : 'driver not running'),
     lamp('Controller', robot.controller ? 'on' : 'off', robot.controller ? 'kinematics alive' : 'kinematics not running'),
-    robot.estop.engaged ? lamp('STOPPED', 'alarm', robot.estop.reason) : null,
+    when(engaged, lamp('STOPPED', 'alarm', engaged ? robot.estop.reason : '')),
     robot.fault ? lamp('FAULT', 'alarm', robot.fault) : null);
   const actions = [];
-  if (robot.estop.engaged) {
-    actions.push(el('button', {
-      type: 'button', 'aria-label': `Release emergency stop of ${robot.id}`,
-      onclick: () => attempt(() => api.post(paths.robot.release(robot.id)),
-        `${robot.id}: emergency stop released. Nothing moves until you ask it to.`),
-    }, 'Release emergency stop'));
-  }
-  if (robot.fault) {
-    actions.push(el('button', {
-      type: 'button', 'aria-label': `Reset fault of ${robot.id}`,
-      onclick: () => attempt(() => api.post(paths.robot.resetFault(robot.id)), `${robot.id}: fault cleared.`),
-    }, 'Reset fault'));
-  }
   if (robot.world) {
     // Simulation only: after a test run the can lies on the floor; one button puts it back.
     actions.push(el('button', {
@@ -36,6 +31,17 @@ function card(robot) {
       onclick: () => attempt(() => api.post(paths.robot.resetWorld(robot.id)),
         `${robot.id}: the ${robot.world} is back as it started.`),
     }, `Put the ${robot.world} back`));
+  }
+  actions.push(when(engaged, el('button', {
+    type: 'button', 'aria-label': `Release emergency stop of ${robot.id}`,
+    onclick: () => attempt(() => api.post(paths.robot.release(robot.id)),
+      `${robot.id}: emergency stop released. Nothing moves until you ask it to.`),
+  }, 'Release emergency stop')));
+  if (robot.fault) {
+    actions.push(el('button', {
+      type: 'button', 'aria-label': `Reset fault of ${robot.id}`,
+      onclick: () => attempt(() => api.post(paths.robot.resetFault(robot.id)), `${robot.id}: fault cleared.`),
+    }, 'Reset fault'));
   }
   return el('div', { class: `robot-card${chosen ? ' chosen' : ''}`, dataset: { robot: robot.id } },
     el('span', {}, el('span', { class: 'name' }, robot.id),
@@ -46,7 +52,8 @@ function card(robot) {
       type: 'button', 'aria-pressed': chosen ? 'true' : 'false', 'aria-label': `${chosen ? 'Commanding' : 'Command'} ${robot.id}`,
       onclick: () => choose(robot.id),
     }, chosen ? 'Commanding' : 'Command'),
-    actions);
+    // Its own line, always there: a Release or Reset fault button that comes moves nothing else.
+    el('div', { class: 'card-actions' }, actions));
 }
 
 export function mountConnection(root) {

@@ -1,4 +1,5 @@
-// The emergency stop: the red button at the top and the Esc key.
+// The emergency stop: the red button at the top and the Esc key; beside it, while a robot is
+// stopped, "Release all".
 //
 // The rule for Esc (the Home page's Safety text says it to the person, in these words):
 // one Esc stops every robot, except when the focus is in a text field or the program editor, or
@@ -9,14 +10,45 @@
 // The page's own Esc handlers say they used the key with preventDefault() (CodeMirror does the
 // same when its keymap closes something), never with stopPropagation(): this listener must hear
 // every Esc to keep the second one a stop.
-import { api, paths } from './api.js';
-import { attempt } from './ui.js';
+import { api, connectedRobots, onChange, paths } from './api.js';
+import { attempt, notify } from './ui.js';
 
 const TEXT_INPUTS = new Set(['text', 'number', 'search', 'email', 'url', 'tel', 'password']);
 const MODIFIERS = new Set(['Shift', 'Control', 'Alt', 'Meta', 'AltGraph', 'CapsLock']);
 
-export function emergencyStop() {
-  return attempt(() => api.post(paths.estop), (r) => `Emergency stop: ${r.robots.length ? r.robots.join(', ') : 'no robot'} stopped. Release it in the Connection Manager.`);
+export async function emergencyStop() {
+  try {
+    const r = await api.post(paths.estop);
+    // Red, and it stays: a stop is never good news that fades.
+    notify(`Emergency stop: ${r.robots.length ? r.robots.join(', ') : 'no robot'} stopped. Release all (at the top) lets them move again.`, 'stop');
+    return r;
+  } catch (e) {
+    notify(e.message);
+    return undefined;
+  }
+}
+
+export function releaseAll() {
+  return attempt(() => api.post(paths.releaseAll),
+    (r) => `Released: ${r.robots.length ? r.robots.join(', ') : 'no robot was stopped'}. Nothing moves until you ask it to.`);
+}
+
+// The bar at the top says, for as long as it lasts, which robots are stopped; "Release all" is
+// beside the stop (its room kept while nothing is stopped, so nothing jumps when it comes).
+function showStopped(button) {
+  const header = document.querySelector('header.top');
+  let last = null;
+  onChange(() => {
+    const stopped = connectedRobots().filter((r) => r.estop.engaged).map((r) => r.id);
+    const key = stopped.join(',');
+    if (key === last) return;
+    last = key;
+    button.dataset.idle = String(!stopped.length);
+    button.disabled = !stopped.length;
+    header.classList.toggle('stopped', stopped.length > 0);
+    const notice = document.getElementById('notice');
+    if (!stopped.length && notice.classList.contains('stop')) notice.hidden = true;   // its news is over
+  });
 }
 
 // Whether `node` takes typed text: a text field, a text area or an editor (contenteditable).
@@ -37,6 +69,9 @@ export function startEmergencyStop() {
     button.classList.toggle('armed', on);
   };
   button.addEventListener('click', () => { arm(false); emergencyStop(); });
+  const release = document.getElementById('release-all');
+  release.addEventListener('click', releaseAll);
+  showStopped(release);
   // Bubbling, on the document: the editor, a list or a name being changed saw the key first.
   document.addEventListener('keydown', (e) => {
     if (e.key !== 'Escape') return;

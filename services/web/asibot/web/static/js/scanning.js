@@ -12,9 +12,12 @@
 // Controls that act while held (jog "Hold to move") take the 'scan:select' event: they start, and
 // the next press of any switch stops them (select-to-start, select-to-stop). When scanning is off
 // this module does nothing at all: no listener acts, no key is taken.
+import { emergencyStop } from './estop.js';
 import { onSettings, settings } from './settings.js';
 import { el } from './ui.js';
 
+// Ringed first at every level that starts over: the stop, and Release all while a robot is stopped.
+const FIRST = ['estop', 'release-all'];
 const ACTIONABLE = 'button, a[href], input:not([type=hidden]), select, textarea, [contenteditable="true"], [role=button]';
 const MAX_GROUP = 8;          // a group with more controls than this is scanned row by row inside
 const TEXT_INPUTS = new Set(['text', 'number', 'search', 'email', 'url', 'tel', 'password']);
@@ -30,7 +33,7 @@ function usable(node) {
 }
 
 function controls(root) {
-  return [...root.querySelectorAll(ACTIONABLE)].filter((n) => n.id !== 'estop' && !n.closest('#scan-ring') && usable(n));
+  return [...root.querySelectorAll(ACTIONABLE)].filter((n) => !FIRST.includes(n.id) && !n.closest('#scan-ring') && usable(n));
 }
 
 function nameOf(node) {
@@ -103,12 +106,47 @@ function groups() {
   return entries.filter(Boolean);
 }
 
-function topEntries() {
-  const estop = item(document.getElementById('estop'));
+function firstEntries() {
+  return FIRST.map((id) => document.getElementById(id)).filter((n) => n && usable(n)).map(item);
+}
+
+function pageEntries() {
   const pattern = settings().pattern;
-  if (pattern === 'group') return [estop, ...groups()];
+  if (pattern === 'group') return groups();
   const all = controls(document.body);
-  return [estop, ...(pattern === 'linear' ? all.map(item) : rowsOf(all).map(rowEntry))];
+  return pattern === 'linear' ? all.map(item) : rowsOf(all).map(rowEntry);
+}
+
+// Home mode: the person's tasks and places (Home's panel, favourites.js) one level deep, and
+// the whole page one select away. Away from Home, the Home tab is offered instead.
+function homeEntries() {
+  const mine = document.getElementById('for-me');
+  const entries = mine && usable(mine) ? controls(mine).map(item)
+    : [{ ...item(document.getElementById('tab-home')), label: 'Home: your tasks and places' }];
+  const tabs = document.getElementById('tabs');
+  entries.push({ nodes: [tabs], label: 'The whole page', page: true, open: () => [...firstEntries(), ...pageEntries()] });
+  return entries;
+}
+
+function topEntries() {
+  return [...firstEntries(), ...(settings().scope === 'home' ? homeEntries() : pageEntries())];
+}
+
+// An opened row or group ends with Back (the ring around the row again): one round leaves it.
+function withBack(entry) {
+  const back = {
+    nodes: entry.nodes, box: entry.box, back: true,
+    label: entry.page ? 'Back to your tasks and places' : `Back: leave this ${entry.box ? 'group' : 'row'}`,
+  };
+  return () => [...entry.open(), back];
+}
+
+// Where an opened row starts: after the control that is current there (the shown tab), so the
+// tab row scans from the page the person is on.
+function startOf(inside) {
+  const current = inside.findIndex((e) => e.nodes.length === 1
+    && (e.nodes[0].getAttribute('aria-selected') === 'true' || e.nodes[0].getAttribute('aria-current') === 'page'));
+  return current < 0 ? 0 : (current + 1) % inside.length;
 }
 
 // --- the ring ----------------------------------------------------------------------------------
@@ -172,6 +210,7 @@ const scan = {
   timer: null,      // automatic scanning's next move
   suspended: 0,     // the Access page is listening for a new switch
   steps: 0,         // moves of the ring, as data-step (a test or a person's tool can follow it)
+  lastTap: null,    // { which, at }: the last tap's release, for two quick taps = stop
 };
 
 function level() { return scan.levels[scan.levels.length - 1]; }
@@ -181,6 +220,9 @@ function mark(entry) {
   scan.entry = entry;
   if (!entry) return;
   for (const n of entry.nodes) n.setAttribute('data-scanned', '');
+  // What the ring stands on, for a test or a person's tool: a control, a row or group, or Back.
+  ring.dataset.kind = entry.back ? 'back' : entry.open ? 'group' : 'control';
+  ring.dataset.label = entry.label;
   chip.textContent = scan.latched ? `${entry.label}: running. Press your switch to stop.` : entry.label;
   place();
 }
@@ -211,10 +253,26 @@ function schedule() {
   if (scan.running && !scan.latched && settings().mode === 'auto') scan.timer = setTimeout(next, settings().intervalMs);
 }
 
-function toTop() { scan.levels = [{ build: topEntries, index: 0, steps: 0 }]; }
+// Start over at the top; in Home mode, inside the whole page, at the whole page's top (its
+// first entry is the stop too).
+function toTop() {
+  const page = scan.levels.length > 1 && scan.levels[1].page ? { ...scan.levels[1], index: 0, steps: 0 } : null;
+  scan.levels = [{ build: topEntries, index: 0, steps: 0 }];
+  if (page && settings().scope === 'home') scan.levels.push(page);
+}
+
+function back() {
+  scan.levels.pop();
+  level().steps = 0;
+  beep(990, 60);
+  show();
+}
 
 function start() {
+  scan.levels = [];
   toTop();
+  // Home mode starts where the person's tasks and places are.
+  if (settings().scope === 'home' && location.hash.slice(1) !== 'home' && location.hash) location.hash = 'home';
   scan.running = true;
   show();
   status();
@@ -242,7 +300,7 @@ function next() {
   lv.steps += 1;
   if (lv.steps >= settings().rounds * n) {
     // Rounds without a select: a row or group closes; at the top, scanning waits for a press.
-    if (scan.levels.length > 1) toTop();
+    if (scan.levels.length > 1) { scan.levels.pop(); level().steps = 0; }
     else { stop(); return; }
   }
   show();
@@ -250,11 +308,12 @@ function next() {
 
 function select() {
   let entry = scan.entry;
+  if (entry && entry.back) { back(); return; }
   // Open a row or group; one that holds a single row or control opens straight into it.
   while (entry && entry.open) {
     const inside = entry.open();
-    if (inside.length > 1) {
-      scan.levels.push({ build: entry.open, index: 0, steps: 0 });
+    if (inside.length > 1 || entry.page) {
+      scan.levels.push({ build: withBack(entry), index: startOf(inside), steps: 0, page: Boolean(entry.page) });
       beep(990, 60);
       show();
       return;
@@ -303,16 +362,35 @@ function activate(node) {
   } else {
     node.focus({ preventScroll: true });
     node.click();
+    // The ring is the one marker: a focus outline left on what was selected would be a second one.
+    if (document.activeElement === node) node.blur();
   }
   if (scan.running) afterSelect();    // the select may have turned scanning off
 }
 
 // --- switch presses ----------------------------------------------------------------------------
+// The stop from anywhere: two quick taps, or (when the person chose it) one long hold. The ring
+// starts over at the stop, so Release all is the next entry.
+function stopEverything() {
+  beep(440, 200);
+  emergencyStop();
+  if (!scan.running) return;
+  toTop();
+  show();
+  status();
+}
+
 function onDown(which) {
   if (scan.press) return;    // one press at a time
-  const press = { which, consumed: true, timer: null };
+  const s = settings();
+  const now = performance.now();
+  const press = { which, consumed: true, timer: null, stopTimer: null };
   scan.press = press;
   unlockAudio();
+  if (s.holdStopMs) press.stopTimer = setTimeout(() => { press.consumed = true; stopEverything(); }, s.holdStopMs);
+  const quick = scan.lastTap && scan.lastTap.which === which && now - scan.lastTap.at <= s.doubleTapMs;
+  scan.lastTap = null;
+  if (quick && s.doubleTapStop && scan.running && !scan.latched) { stopEverything(); return; }
   if (scan.latched) {
     const stopIt = scan.latched;
     scan.latched = null;
@@ -322,8 +400,10 @@ function onDown(which) {
     return;
   }
   if (!scan.running) { start(); return; }
-  const s = settings();
-  if (s.switches === 2) { if (which === 'next') next(); else select(); return; }
+  if (s.switches === 2) {
+    if (which === 'next') { next(); press.tap = true; } else select();
+    return;
+  }
   if (s.mode === 'auto') { select(); return; }
   press.consumed = false;
   press.timer = setTimeout(() => { press.consumed = true; select(); }, s.holdMs);
@@ -333,12 +413,16 @@ function onUp(which) {
   const press = scan.press;
   if (!press || press.which !== which) return;
   clearTimeout(press.timer);
+  clearTimeout(press.stopTimer);
   scan.press = null;
-  if (!press.consumed) next();
+  if (!press.consumed) { next(); press.tap = true; }
+  // A tap (a move of the ring, never a select): a second one soon after is the stop.
+  if (press.tap) scan.lastTap = { which, at: performance.now() };
 }
 
 function forgetPress() {
-  if (scan.press) { clearTimeout(scan.press.timer); scan.press = null; }
+  if (scan.press) { clearTimeout(scan.press.timer); clearTimeout(scan.press.stopTimer); scan.press = null; }
+  scan.lastTap = null;
 }
 
 function on() { return settings().enabled && !scan.suspended; }
@@ -443,8 +527,11 @@ export function captureSwitch(cancel) {
 
 // --- status line and start-up ------------------------------------------------------------------
 export function describe(s = settings()) {
-  if (s.switches === 2) return `${s.next.label} moves on, ${s.select.label} selects`;
-  return s.mode === 'auto' ? `press ${s.next.label} to select` : `tap ${s.next.label} to move on, hold it to select`;
+  const how = s.switches === 2 ? `${s.next.label} moves on, ${s.select.label} selects`
+    : s.mode === 'auto' ? `press ${s.next.label} to select` : `tap ${s.next.label} to move on, hold it to select`;
+  const stops = [s.doubleTapStop && s.mode === 'step' ? `${s.switches === 2 ? s.next.label : 'tap it'} twice quickly` : '',
+    s.holdStopMs ? `hold it ${s.holdStopMs / 1000} s` : ''].filter(Boolean);
+  return stops.length ? `${how}; ${stops.join(' or ')} to stop every robot` : how;
 }
 
 function status() {

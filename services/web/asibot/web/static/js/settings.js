@@ -14,6 +14,8 @@ export const LIMITS = {
   intervalMs: [100, 10000, 100],
   holdMs: [100, 3000, 100],
   rounds: [1, 10, 1],
+  doubleTapMs: [100, 1000, 50],
+  holdStopMs: [0, 10000, 500],
 };
 
 // The choices of each multiple-choice setting, in the order the Access page shows them.
@@ -23,6 +25,7 @@ export const CHOICES = {
   switches: [1, 2],
   afterSelect: ['start', 'stay'],
   messages: ['fade', 'stay'],
+  scope: ['page', 'home'],
 };
 
 export const DEFAULTS = Object.freeze({
@@ -38,6 +41,13 @@ export const DEFAULTS = Object.freeze({
   next: Object.freeze({ kind: 'key', code: 'Space', label: 'Space' }),
   select: Object.freeze({ kind: 'key', code: 'Enter', label: 'Enter' }),
   messages: 'fade',
+  // What the ring goes over: the whole page, or Home's tasks and places (one level deep).
+  scope: 'page',
+  // Two taps of the switch this close together (ms, release to press) stop every robot.
+  doubleTapStop: true,
+  doubleTapMs: 350,
+  // A press held this long (ms) stops every robot; 0: off (a person with a tremor may hold on).
+  holdStopMs: 0,
 });
 
 const NAMES = {
@@ -45,6 +55,8 @@ const NAMES = {
   intervalMs: 'the scanning time (ms)', holdMs: 'the hold time (ms)', rounds: 'the number of rounds',
   afterSelect: 'what happens after a select', messages: 'how messages go away',
   next: 'the next switch', select: 'the select switch', enabled: 'scanning on or off', sound: 'the beep',
+  scope: 'what the ring goes over', doubleTapStop: 'two quick taps stop', doubleTapMs: 'the time between two quick taps (ms)',
+  holdStopMs: 'the long hold that stops (ms)',
 };
 
 class Invalid extends Error {}
@@ -92,6 +104,9 @@ export function check(raw) {
     }
   }
   if (out.switches === 2 && sameSwitch(out.next, out.select)) throw new Invalid('the next and select switches must differ');
+  if (out.holdStopMs && out.holdStopMs < out.holdMs + 500) {
+    throw new Invalid('the long hold that stops must be at least 500 ms longer than the hold that selects (or 0: off)');
+  }
   return Object.freeze(out);
 }
 

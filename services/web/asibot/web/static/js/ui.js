@@ -47,14 +47,14 @@ function watch(box) {
   box.addEventListener('focusout', resume);
 }
 
-// Show a sentence under the tabs.
+// Show a sentence under the tabs: kind 'error' (stays), 'stop' (red, stays) or 'info' (good news).
 export function notify(text, kind = 'error') {
   const box = document.getElementById('notice');
   watch(box);
   box.replaceChildren(el('span', {}, text),
     el('button', { type: 'button', onclick: () => { box.hidden = true; } }, 'Dismiss'));
-  box.className = kind === 'error' ? 'notice' : 'notice info';
-  box.setAttribute('role', kind === 'error' ? 'alert' : 'status');
+  box.className = { error: 'notice', stop: 'notice stop', info: 'notice info' }[kind];
+  box.setAttribute('role', kind === 'info' ? 'status' : 'alert');
   box.hidden = false;
   clearTimeout(noticeTimer);
   if (fades(box)) fadeLater(box);

@@ -15,6 +15,9 @@ const CLOUD_MS = 333;
 const CAMERAS_MS = 5000;
 const POINTS = new THREE.PointsMaterial({ size: 0.03, vertexColors: true });
 const CLOUD_SHOWN = 'asibot.cloud';
+// Frames at least this far apart (25 a second), ms; a joint that moved less than SEEN_DEG is not redrawn.
+const FRAME_MS = 40;
+const SEEN_DEG = 0.05;
 const GHOST = new THREE.MeshStandardMaterial({ color: 0xff9f1a, transparent: true, opacity: 0.35, depthWrite: false });
 
 function paint(robot, material) {
@@ -69,8 +72,14 @@ export class RobotViewer {
     this.dirty = true;
     this.controls.addEventListener('change', () => { this.dirty = true; });
     new ResizeObserver(() => this.resize()).observe(this.picture);
-    const loop = () => {
-      if (this.dirty && this.picture.isConnected) { this.renderer.render(this.scene, this.camera); this.dirty = false; }
+    // Draw only what changed, and at most FRAME_MS apart: without a GPU every frame costs a core.
+    let drawn = 0;
+    const loop = (now) => {
+      if (this.dirty && this.picture.isConnected && now - drawn >= FRAME_MS) {
+        this.renderer.render(this.scene, this.camera);
+        this.dirty = false;
+        drawn = now;
+      }
       requestAnimationFrame(loop);
     };
     requestAnimationFrame(loop);
@@ -197,6 +206,11 @@ export class RobotViewer {
   setJoints(names, degrees) {
     this.latest = [names, degrees];
     if (!this.robot || this.paused) return;
+    // Every robot's news calls this; a still arm (or one that moved less than anyone can see) draws nothing.
+    const drawn = this.drawnJoints;
+    if (drawn && drawn.robot === this.robot && drawn.names.join() === names.join()
+        && degrees.every((d, i) => Math.abs(d - drawn.degrees[i]) < SEEN_DEG)) return;
+    this.drawnJoints = { robot: this.robot, names, degrees: [...degrees] };
     names.forEach((name, i) => this.robot.setJointValue(name, THREE.MathUtils.degToRad(degrees[i])));
     this.dirty = true;
   }

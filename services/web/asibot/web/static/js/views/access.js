@@ -3,7 +3,8 @@
 // with − and + buttons, so it can itself be set by scanning.
 import { captureSwitch, describe } from '../scanning.js';
 import { CHOICES, LIMITS, exportText, importText, onSettings, reset, settings, update } from '../settings.js';
-import { FADE_MS, confirmable, el, notify } from '../ui.js';
+import { api, paths } from '../api.js';
+import { FADE_MS, attempt, confirmable, el, notify } from '../ui.js';
 
 const LABELS = {
   enabled: { heading: 'Switch scanning', values: [[false, 'Off'], [true, 'On']] },
@@ -12,6 +13,8 @@ const LABELS = {
   switches: { heading: 'Switches', values: [[1, 'One switch: tap = next, hold = select'], [2, 'Two switches: next and select']] },
   afterSelect: { heading: 'After a select', values: [['start', 'Start again at the Emergency stop'], ['stay', 'Stay on the control']] },
   sound: { heading: 'Sound', values: [[false, 'Silent'], [true, 'Beep at each step']] },
+  scope: { heading: 'What the ring goes over', values: [['page', 'The whole page'], ['home', 'My tasks and places first (Home)']] },
+  doubleTapStop: { heading: 'Two quick taps', values: [[true, 'Stop every robot'], [false, 'Move the ring twice']] },
   messages: { heading: 'Good-news messages', values: [['fade', `Fade after ${FADE_MS / 1000} s`], ['stay', 'Stay until I dismiss them']] },
 };
 
@@ -88,6 +91,35 @@ function switchRow(which) {
   return { node: row, sync, stop: () => listening && listening.stopListening() };
 }
 
+// The carer's order of the person's tasks and places on Home (the rest follows by use).
+function orderPanel() {
+  const list = el('ol', { class: 'points order', 'aria-label': 'Order on Home' });
+  const how = el('p', { role: 'status' });
+  let items = [];
+  const draw = (data) => {
+    items = data.items;
+    how.textContent = data.order.length ? 'In the order you set; what you did not place follows, most used first.'
+      : 'Most used first, as the person uses them. Move one to set the order yourself.';
+    const say = (i) => (i.kind === 'task' ? i.name : `Go to ${i.name} (${i.robot})`);
+    list.replaceChildren(...items.map((item, n) => el('li', {},
+      el('span', { class: 'pname' }, say(item)), el('span', { class: 'muted' }, ` used ${item.uses}×`),
+      el('button', { type: 'button', 'aria-label': `Earlier: ${say(item)}`, disabled: n === 0, onclick: () => move(n, -1) }, 'Earlier'),
+      el('button', { type: 'button', 'aria-label': `Later: ${say(item)}`, disabled: n === items.length - 1, onclick: () => move(n, 1) }, 'Later'))));
+  };
+  const put = (order) => attempt(async () => draw(await api.put(paths.favouritesOrder, { order })));
+  const move = (n, by) => {
+    const keys = items.map((i) => i.key);
+    [keys[n], keys[n + by]] = [keys[n + by], keys[n]];
+    put(keys);
+  };
+  api.get(paths.favourites).then(draw).catch((e) => notify(e.message));
+  const node = el('section', { class: 'panel', 'aria-label': 'Order on Home' },
+    el('h2', {}, 'Order on Home'),
+    el('p', {}, 'The person\'s tasks and places, as Home shows them and the ring goes over them: the first ones take the fewest presses.'),
+    how, list, el('div', { class: 'row' }, el('button', { type: 'button', onclick: () => put([]) }, 'Order by use')));
+  return { node };
+}
+
 function download() {
   const url = URL.createObjectURL(new Blob([exportText()], { type: 'application/json' }));
   const a = el('a', { href: url, download: 'asibot-access-settings.json' });
@@ -102,9 +134,12 @@ export default {
   title: 'Access',
   mount(root) {
     const how = el('p', { class: 'big', role: 'status' });
-    const parts = [choice('enabled'), choice('mode'), choice('pattern'), choice('switches'), switchRow('next'), switchRow('select'),
+    const parts = [choice('enabled'), choice('scope'), choice('mode'), choice('pattern'), choice('switches'), switchRow('next'), switchRow('select'),
       number('intervalMs', 'Scanning time, automatic', 'ms'), number('holdMs', 'Hold to select, one switch', 'ms'),
-      number('rounds', 'Rounds before scanning stops', null), choice('afterSelect'), choice('sound')];
+      number('rounds', 'Rounds before scanning stops', null), choice('afterSelect'), choice('sound'),
+      choice('doubleTapStop'), number('doubleTapMs', 'Two quick taps: at most this apart', 'ms'),
+      number('holdStopMs', 'A hold this long stops every robot, 0: off', 'ms')];
+    const order = orderPanel();
     const messages = choice('messages');
     const upload = el('input', { type: 'file', accept: '.json,application/json' });
     upload.addEventListener('change', async () => {
@@ -126,6 +161,7 @@ export default {
         how,
         parts.map((p) => p.node)),
       el('div', {},
+        order.node,
         el('section', { class: 'panel', 'aria-label': 'Messages' },
           el('h2', {}, 'Messages'),
           el('p', {}, 'Errors stay until you press Dismiss. Good news fades unless you point at it, or you choose “Stay until I dismiss them”.'),

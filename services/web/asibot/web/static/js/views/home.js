@@ -1,14 +1,45 @@
 // Home tab: what this page is for, the robot it commands, and the Task Creator wizard.
 import { api, chosenRobot, paths } from '../api.js';
-import { attempt, el } from '../ui.js';
+import { attempt, el, notify } from '../ui.js';
 import { startWizard } from '../wizard.js';
+import { favouritesPanel } from '../favourites.js';
+import { describe } from '../scanning.js';
+import { onSettings, settings, update as updateSettings } from '../settings.js';
+
+// Switch access, found where a carer starts: on or off in one action, for the person's tasks and
+// places (the Access page has every other setting).
+function switchAccess() {
+  const says = el('p', { role: 'status' });
+  const button = el('button', { type: 'button', class: 'primary big' });
+  const sync = (s) => {
+    says.textContent = s.enabled
+      ? `Switch scanning is on: ${describe(s)}. Press your switch (${s.next.label}) to start the ring.`
+      : 'For a person who uses one or two switches (a big button, a head switch) or a key: a ring goes over '
+        + 'the tasks and places above, the Emergency stop first, and the switch chooses. Tap Space to move, hold it to choose; '
+        + 'two quick taps stop every robot.';
+    button.textContent = s.enabled ? 'Turn switch scanning off' : 'Turn switch scanning on';
+  };
+  button.addEventListener('click', () => {
+    const on = !settings().enabled;
+    updateSettings(on ? { enabled: true, scope: 'home' } : { enabled: false });
+    notify(on ? 'Switch scanning is on, for your tasks and places. The Access page has its other settings.'
+      : 'Switch scanning is off.', 'info');
+  });
+  sync(settings());
+  const off = onSettings(sync);
+  const node = el('section', { class: 'panel', 'aria-label': 'Switch access' }, el('h2', {}, 'Switch access'), says,
+    el('div', { class: 'row' }, button, el('a', { href: '#access', class: 'button-link' }, 'All access settings')));
+  return { node, unmount: off };
+}
 
 export default {
   id: 'home',
   title: 'Home',
   mount(root) {
     const status = el('p', { class: 'big', role: 'status' });
-    root.replaceChildren(
+    const mine = favouritesPanel();
+    const access = switchAccess();
+    root.replaceChildren(mine.node,
       el('section', { class: 'panel' },
         el('h2', {}, 'Teach the robot a task'),
         el('p', {}, 'Move the arm, capture the points it should visit, write a short program with them, ',
@@ -17,10 +48,12 @@ export default {
         el('div', { class: 'row' },
           el('button', { type: 'button', class: 'primary big', onclick: startWizard }, 'Start the Task Creator wizard'),
           el('a', { href: '#launcher', class: 'button-link' }, 'Go to the Launcher'))),
+      access.node,
       el('section', { class: 'panel' },
         el('h2', {}, 'Safety'),
-        el('p', {}, 'The red Emergency stop button at the top, or the Esc key, stops every robot and the running program at once. ',
-          'Release it in the Connection Manager; nothing moves again until you ask it to.'),
+        el('p', {}, 'The red Emergency stop button at the top, or the Esc key, stops every robot and the running program at once; ',
+          'with switch scanning, so do two quick taps of the switch. Release all, beside it, lets them move again; ',
+          'nothing moves until you ask it to.'),
         el('p', { id: 'esc-rule' }, 'The Esc key: one Esc stops. In a text field or the program editor, or when Esc closes something ',
           '(the editor\'s list of completions, its search box, a name being changed), the first Esc only does that and the ',
           'button at the top says "Esc again: emergency stop"; the second Esc stops. So two Esc presses in a row always stop.')));
@@ -60,6 +93,6 @@ export default {
       status.textContent = r ? `Commanding ${r.id} (${r.simulated ? 'simulated' : 'real'} ${r.arm || 'robot'}).`
         : 'No robot commanded yet: press Command beside one in the Connection Manager at the top.';
     };
-    return { update };
+    return { update, unmount: () => { mine.unmount(); access.unmount(); } };
   },
 };

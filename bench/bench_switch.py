@@ -1,0 +1,203 @@
+"""One switch, few presses: what a person with one switch (Space: tap = next, hold = select)
+pays for the robot's common tasks, beside the page as it was before issue 30, in the same run.
+
+Rows, each in presses and in seconds from the first press to the robot doing it:
+- launch the red-can task (the task started on the arm);
+- send the Pioneer to the fridge (its nav took the goal);
+- the emergency stop from the farthest point (the ring inside the tab row, on its first tab);
+- release it (every robot stopped by it released).
+
+The reference is the page of `--reference` (a commit; by default the one before issue 30),
+served by today's server (ASIBOT_WEB_STATIC): the routes it calls are all still there. It is
+driven as it was set up then: switch scanning on, the whole page. Today's page is driven as a
+carer sets it up once on Home ("Turn switch scanning on": the person's tasks and places first;
+two quick taps stop every robot). The script takes the shortest way a person would: tap to the
+entry that holds the control, hold to open it, and so on (tests/web/switch.py).
+
+    python bench/bench_switch.py [--reference COMMIT]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+from pathlib import Path
+from typing import Callable
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "bench"))
+sys.path.insert(0, str(ROOT))
+
+from table import print_table  # noqa: E402
+
+from asibot.testing import Stack, wait_until  # noqa: E402
+from tests.web import switch  # noqa: E402
+from tests.web.conftest import CHROMIUM, CHROMIUM_ARGS, fresh_page  # noqa: E402
+
+ARM, BASE = "asibot-sim", "pioneer-sim"
+TASK = "Give me the red can"
+RED_CAN = ROOT / "libs" / "common" / "asibot" / "examples" / "give_me_the_red_can.py"
+#: The page before issue 30 (one switch, few presses).
+REFERENCE = "32b0496"
+GOALS = {"launch the red-can task": 5, "send the Pioneer to the fridge": 8,
+         "emergency stop from the farthest point": 2, "release it": 3}
+STATIC = Path("services/web/asibot/web/static")
+
+
+def old_page(commit: str, into: Path) -> Path:
+    """The page's files at `commit`, with today's npm bundle (it is built, not kept in git)."""
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", commit, str(STATIC)], check=True, capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
+    static = into / STATIC
+    # A copy: the server follows no symbolic link out of its static folder.
+    shutil.copytree(ROOT / "services" / "web" / "asibot" / "web" / "static" / "vendor", static / "vendor")
+    return static
+
+
+def served(url: str) -> bool:
+    try:
+        return urllib.request.urlopen(url, timeout=1).status == 200
+    except OSError:
+        return False
+
+
+def stack(folder: Path) -> Stack:
+    s = Stack(folder, "sim", ["web", "kinematics-asibot-sim", "kinematics-pioneer-sim", "nav-pioneer-sim"],
+              ROOT / "compose.yaml")
+    s.wait_alive(f"sim/{ARM}", f"kinematics/{ARM}", f"sim/{BASE}", f"nav/{BASE}", "web/main", timeout=120)
+    wait_until(lambda: served(s.web_url), timeout=30, interval=0.3)
+    s.web("PUT", "/api/programs/give_me_the_red_can", {"text": RED_CAN.read_text()})
+    s.web("PUT", "/api/tasks/Give%20me%20the%20red%20can", {"program": "give_me_the_red_can", "words": [], "icon": "can.svg"})
+    return s
+
+
+def engaged(s: Stack) -> list[str]:
+    return [r for r in (ARM, BASE) if s.web("GET", f"/api/robots/{r}")[1]["estop"]["engaged"]]
+
+
+def measured(page, act: Callable[[switch.Presses], None], done: Callable[[], bool]) -> tuple[int, float]:
+    """Presses and seconds from the first press until `done`."""
+    presses = switch.Presses(page)
+    t0 = time.monotonic()
+    act(presses)
+    wait_until(done, timeout=60, interval=0.05)
+    return presses.count, time.monotonic() - t0
+
+
+def flows(s: Stack, page, today: bool) -> dict[str, tuple[int, float]]:
+    out = {}
+    ready = "#for-me .favourite" if today else "text=Teach the robot a task"
+    settings = {"enabled": True, "scope": "home", "doubleTapStop": True} if today else {"enabled": True}
+    if not today:
+        # The page before knew no setting it did not have: a stored file with one is refused whole.
+        page.evaluate("localStorage.setItem('asibot.access', JSON.stringify({format: 'asibot-access-settings', version: 1, enabled: true}))")
+        page.goto(page.url.split("#")[0] + "#home")
+        page.reload()
+        page.wait_for_selector("body[data-ready=true]")
+        page.wait_for_selector(ready, timeout=15000)
+    else:
+        switch.with_settings(page, "#home", ready, ARM, **settings)
+
+    def launched() -> bool:
+        run = s.web("GET", "/api/run")[1]
+        return run["program"] == TASK and (run["running"] or run["last"] is not None)
+
+    def launch(p: switch.Presses) -> None:
+        p.start()
+        if not today:
+            p.to("Launcher")
+            page.wait_for_selector(".task-button")
+        p.to(f"Launch {TASK}")
+    out["launch the red-can task"] = measured(page, launch, launched)
+    wait_until(lambda: not s.web("GET", "/api/run")[1]["running"], timeout=180)
+
+    def going() -> bool:
+        nav = s.web("GET", f"/api/robots/{BASE}")[1].get("nav") or {}
+        status = nav.get("status") or {}
+        return status.get("state") == "active" and "fridge" in (status.get("text") or "")
+
+    def fridge(p: switch.Presses) -> None:
+        if not today:
+            p.to("Base")
+            page.wait_for_selector(f"text=Command {BASE}")
+            p.to(f"Command {BASE}")
+            page.wait_for_selector(".points li[data-place=fridge]", timeout=15000)
+        p.to("Go to fridge")
+    out["send the Pioneer to the fridge"] = measured(page, fridge, going)
+    s.web("POST", f"/api/base/{BASE}/cancel")
+
+    def farthest() -> None:
+        """The ring inside the first row of tabs, on its first entry: the farthest from the stop."""
+        tabs = page.evaluate("[...document.querySelectorAll('#tabs [role=tab]')].map((t) => t.innerText)")
+        walk = switch.Presses(page)
+        if today:
+            walk.to("The whole page")
+        walk.until(lambda r: "Home" in r and set(r) <= set(tabs))   # the first row of tabs
+        walk.hold()
+        page.wait_for_timeout(walk.gap_ms)
+
+    def stop(p: switch.Presses) -> None:
+        if today:
+            p.quick_taps()
+        else:                                     # round and round the row until it closes
+            p.to("Emergency stop Esc")
+    farthest()
+    out["emergency stop from the farthest point"] = measured(page, stop, lambda: engaged(s) == [ARM, BASE])
+
+    def release(p: switch.Presses) -> None:
+        if today:
+            page.wait_for_selector("#release-all[data-idle=false]")
+            p.to("Release all emergency stops")
+            return
+        for robot in (ARM, BASE):
+            page.wait_for_selector(f"[aria-label='Release emergency stop of {robot}']")
+            p.to(f"Release emergency stop of {robot}")
+    out["release it"] = measured(page, release, lambda: not engaged(s))
+    return out
+
+
+def run(reference: str) -> list[tuple]:
+    from playwright.sync_api import sync_playwright
+    results = {}
+    with tempfile.TemporaryDirectory() as d:
+        for name in ("before", "today"):
+            folder = Path(d) / name
+            folder.mkdir()
+            if name == "before":
+                os.environ["ASIBOT_WEB_STATIC"] = str(old_page(reference, folder))
+            s = stack(folder)
+            os.environ.pop("ASIBOT_WEB_STATIC", None)
+            try:
+                with sync_playwright() as p:
+                    browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
+                    try:
+                        with fresh_page(browser, s.web_url, robots=(ARM, BASE), size=(1280, 800)) as page:
+                            results[name] = flows(s, page, today=name == "today")
+                    finally:
+                        browser.close()
+            finally:
+                s.stop()
+    rows = []
+    for task, goal in GOALS.items():
+        (n0, t0), (n1, t1) = results["before"][task], results["today"][task]
+        rows.append((f"{task}: presses", "presses", n1, f"page at {reference}", n0, f"goal {goal}: {'met' if n1 <= goal else 'NOT met'}"))
+        rows.append((f"{task}: time", "s", t1, f"page at {reference}", t0, ""))
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--reference", default=REFERENCE, help="the commit whose page is the reference")
+    args = parser.parse_args()
+    print("One switch (Space: tap = next, hold = select), chromium at 1280 x 800\n")
+    print_table(run(args.reference), ("what", "unit", "today", "reference", "reference value", "goal"))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,123 @@
+"""What this person uses most: how often each task was launched and each place gone to, and the
+order the carer chose, in favourites.json of the data folder.
+
+The page's Home offers the person's tasks and places one level deep, most used first, so one
+switch reaches the usual ones in a few presses; a carer who knows better sets the order, and
+what the order leaves out follows by use. An item is named by a key:
+
+    task:<task name>                 a Launcher task
+    place:<robot>/<place name>       a named place of a mobile robot
+
+    {"uses": {"task:Give me the red can": 4, "place:pioneer-sim/fridge": 2},
+     "order": ["place:pioneer-sim/fridge", "task:Give me the red can"]}
+
+Plain Python, no web framework and no bus; writes are atomic and under the folder's one lock.
+A file edited by hand keeps what makes sense and leaves the rest out.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+from asibot.files import write_atomic
+from asibot.web.userdata.errors import UserDataError
+from asibot.web.userdata.folder import Folder, log
+
+FILE = "favourites.json"
+#: Keys kept: every task and place of a home, with room; a runaway page cannot grow the file.
+MAX_KEYS = 500
+MAX_KEY = 200
+KINDS = ("task", "place")
+
+
+def task_key(name: str) -> str:
+    return f"task:{name}"
+
+
+def place_key(robot: str, name: str) -> str:
+    return f"place:{robot}/{name}"
+
+
+def check_key(key: object) -> str:
+    """A key as the page sends it, or a sentence saying what a key looks like."""
+    if not isinstance(key, str) or not 0 < len(key) <= MAX_KEY:
+        raise UserDataError(f"An item is named by a key of 1 to {MAX_KEY} characters, like \"task:Give me the "
+                            "red can\" or \"place:pioneer-sim/fridge\".")
+    kind, _, rest = key.partition(":")
+    if kind not in KINDS or not rest or (kind == "place" and "/" not in rest):
+        raise UserDataError(f"{key!r} is not an item: say \"task:<task>\" or \"place:<robot>/<place>\".")
+    return key
+
+
+@dataclass
+class Usage:
+    uses: dict[str, int]
+    order: list[str]
+
+    def rank(self, keys: list[str]) -> list[str]:
+        """`keys` in the person's order: the carer's first, as the carer put them; then by use
+        (most first), tasks before places (a task is what the Launcher is for), then by name."""
+        chosen = [k for k in self.order if k in keys]
+        rest = sorted((k for k in keys if k not in chosen),
+                      key=lambda k: (-self.uses.get(k, 0), KINDS.index(k.partition(":")[0]), k.casefold()))
+        return chosen + rest
+
+
+class Favourites:
+    """favourites.json of one folder."""
+
+    def __init__(self, folder: Folder) -> None:
+        self.folder = folder
+
+    def read(self) -> Usage:
+        with self.folder.lock:
+            path = self.folder.root / FILE
+            raw: object = {}
+            if path.is_file():
+                try:
+                    raw = json.loads(path.read_text(encoding="utf-8"))
+                except (OSError, ValueError) as exc:
+                    log.warning("%s left out: it is not JSON (%s)", FILE, exc)
+            raw = raw if isinstance(raw, dict) else {}
+            uses, order = raw.get("uses"), raw.get("order")
+            kept_uses = {k: v for k, v in (uses.items() if isinstance(uses, dict) else ())
+                         if _is_key(k) and isinstance(v, int) and not isinstance(v, bool) and v > 0}
+            kept_order = list(dict.fromkeys(k for k in (order if isinstance(order, list) else []) if _is_key(k)))
+            return Usage(dict(list(kept_uses.items())[:MAX_KEYS]), kept_order[:MAX_KEYS])
+
+    def _write(self, usage: Usage) -> None:
+        write_atomic(self.folder.root / FILE,
+                     (json.dumps({"uses": usage.uses, "order": usage.order}, indent=1) + "\n").encode())
+
+    def used(self, key: str) -> None:
+        """Count one use of `key` (a launch, a trip)."""
+        check_key(key)
+        with self.folder.lock:
+            usage = self.read()
+            if key not in usage.uses and len(usage.uses) >= MAX_KEYS:
+                # Forget the least used: what is used now matters more.
+                del usage.uses[min(usage.uses, key=usage.uses.__getitem__)]
+            usage.uses[key] = usage.uses.get(key, 0) + 1
+            self._write(usage)
+
+    def set_order(self, order: list[str]) -> Usage:
+        """The carer's order (an empty list: by use alone); a bad key changes nothing."""
+        if len(order) > MAX_KEYS:
+            raise UserDataError(f"An order may name up to {MAX_KEYS} items.")
+        checked = [check_key(k) for k in order]
+        if len(set(checked)) != len(checked):
+            raise UserDataError("An item may appear once in the order.")
+        with self.folder.lock:
+            usage = self.read()
+            usage.order = checked
+            self._write(usage)
+            return usage
+
+
+def _is_key(key: object) -> bool:
+    try:
+        check_key(key)
+    except UserDataError:
+        return False
+    return True

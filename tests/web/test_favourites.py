@@ -1,0 +1,99 @@
+"""The person's tasks and places on Home: counted where they are used, ranked by the carer's
+order and then by use, kept in favourites.json, and refused with a sentence when a request is bad
+(nothing changes)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from asibot.testing import wait_until
+from asibot.web.userdata import UserDataError
+from asibot.web.userdata.favourites import FILE, Favourites, Usage, place_key, task_key
+from asibot.web.userdata.folder import Folder
+
+from .conftest import API_ROBOT as ROBOT, settle
+
+
+def test_the_carers_order_comes_first_then_the_most_used_then_by_name():
+    usage = Usage(uses={"task:b": 1, "task:c": 5, "place:p/x": 2}, order=["task:a"])
+    assert usage.rank(["task:b", "task:a", "task:c", "place:p/x", "task:d"]) == [
+        "task:a", "task:c", "place:p/x", "task:b", "task:d"]
+    # Never used: the Launcher's tasks before the places, each by name.
+    assert Usage(uses={}, order=[]).rank(["place:p/a", "task:z", "task:b"]) == ["task:b", "task:z", "place:p/a"]
+    # An item of the order that is gone (a task deleted) takes no place.
+    assert Usage(uses={}, order=["task:gone", "task:b"]).rank(["task:a", "task:b"]) == ["task:b", "task:a"]
+
+
+def test_uses_and_the_order_are_kept_and_a_hand_edited_file_keeps_what_makes_sense(tmp_path):
+    folder = Folder(tmp_path)
+    fav = Favourites(folder)
+    fav.used(task_key("Give me the red can"))
+    fav.used(task_key("Give me the red can"))
+    fav.used(place_key("pioneer-sim", "fridge"))
+    fav.set_order([place_key("pioneer-sim", "fridge")])
+    again = Favourites(Folder(tmp_path)).read()
+    assert again.uses == {"task:Give me the red can": 2, "place:pioneer-sim/fridge": 1}
+    assert again.order == ["place:pioneer-sim/fridge"]
+    (tmp_path / FILE).write_text(json.dumps({"uses": {"task:a": 3, "nonsense": 4, "task:b": -1, "task:c": True},
+                                             "order": ["task:a", 7, "task:a", "place:nobody"]}))
+    kept = fav.read()
+    assert kept.uses == {"task:a": 3} and kept.order == ["task:a"]
+    (tmp_path / FILE).write_text("{not json")
+    assert fav.read() == Usage({}, [])
+
+
+@pytest.mark.parametrize("order,words", [
+    (["fridge"], "is not an item"),
+    (["task:a", "task:a"], "once"),
+    (["place:fridge"], "is not an item"),
+    (["x" * 300], "1 to 200 characters"),
+])
+def test_a_bad_order_is_refused_and_changes_nothing(tmp_path, order, words):
+    fav = Favourites(Folder(tmp_path))
+    fav.set_order(["task:a"])
+    with pytest.raises(UserDataError, match=words):
+        fav.set_order(order)
+    assert fav.read().order == ["task:a"]
+
+
+def test_home_lists_the_tasks_by_use_and_the_carer_can_order_them(web):
+    client, svc, driver, server = web
+    settle(web)
+    client.put("/api/programs/fav_hello", json={"text": "print('hello')\n"})
+    for name in ("Alpha", "Beta"):
+        assert client.put(f"/api/tasks/{name}", json={"program": "fav_hello", "words": [], "icon": "face.svg"}).status_code == 200
+    try:
+        names = lambda: [i["name"] for i in client.get("/api/favourites").json()["items"] if i["name"] in ("Alpha", "Beta")]
+        assert names() == ["Alpha", "Beta"]                       # never used: by name
+        assert client.post("/api/tasks/Beta/launch", json={"robot": ROBOT}).status_code == 200
+        wait_until(lambda: not svc.web.runner.status()["running"], timeout=20)
+        assert names() == ["Beta", "Alpha"]                       # Beta was launched once
+        beta = next(i for i in client.get("/api/favourites").json()["items"] if i["name"] == "Beta")
+        assert beta == {"key": "task:Beta", "kind": "task", "name": "Beta", "icon": "face.svg", "uses": 1}
+        reply = client.put("/api/favourites/order", json={"order": ["task:Alpha"]})
+        assert reply.status_code == 200 and reply.json()["order"] == ["task:Alpha"]
+        assert names() == ["Alpha", "Beta"]                       # the carer's order first
+        before = (svc.web.data.root / FILE).read_bytes()
+        for body, status in (({"order": ["Alpha"]}, 400), ({"order": "task:Alpha"}, 422), ({"order": [], "x": 1}, 422),
+                             ({"order": [5]}, 422)):
+            bad = client.put("/api/favourites/order", json=body)
+            assert bad.status_code == status, bad.text
+            assert bad.json()["message"]
+        assert (svc.web.data.root / FILE).read_bytes() == before
+        assert client.put("/api/favourites/order", json={"order": []}).json()["order"] == []
+    finally:
+        for name in ("Alpha", "Beta"):
+            client.delete(f"/api/tasks/{name}")
+
+
+def test_release_all_releases_every_stopped_robot_and_only_those(web):
+    client, svc, driver, server = web
+    settle(web)
+    assert client.post("/api/release").json() == {"robots": []}
+    assert client.post("/api/estop").json()["robots"] == [ROBOT]
+    wait_until(lambda: svc.fleet.view(ROBOT)["estop"]["engaged"], timeout=5)
+    assert client.post("/api/release").json() == {"robots": [ROBOT]}
+    wait_until(lambda: not svc.fleet.view(ROBOT)["estop"]["engaged"], timeout=5)
+    wait_until(lambda: not server.ctl.estop, timeout=5)
