@@ -301,6 +301,28 @@ def test_the_emergency_stop_stays_on_screen_however_far_the_page_scrolls(page):
     assert 0 <= box["y"] and box["y"] + box["height"] <= 200, box
 
 
+def test_resting_the_pointer_on_a_task_launches_it_and_passing_over_it_chooses_nothing(page, kitchen, task):
+    """Dwell to choose, for eye-gaze or a head pointer (which move the mouse pointer)."""
+    with_settings(page, "launcher", dwellMs=750)
+    button = page.get_by_role("button", name=f"Launch {TASK}")
+    box = button.bounding_box()
+    centre = (box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    before = last_run(kitchen)["started"]
+    page.mouse.move(*centre)
+    page.wait_for_timeout(300)
+    assert "dwelling" in button.get_attribute("class")                   # its ring fills
+    page.mouse.move(30, 30)                                            # off, onto the title: nothing
+    page.wait_for_timeout(900)
+    assert last_run(kitchen)["started"] == before and "dwelling" not in button.get_attribute("class")
+    page.mouse.move(*centre)                                           # and rest
+    wait_until(lambda: last_run(kitchen)["started"] != before, timeout=10, message="resting on it launched nothing")
+    started = last_run(kitchen)["started"]
+    wait_until(lambda: not last_run(kitchen)["running"], timeout=30)
+    page.mouse.move(centre[0] + 3, centre[1] + 2)                      # still resting: chosen once only
+    page.wait_for_timeout(1200)
+    assert last_run(kitchen)["started"] == started
+
+
 @pytest.mark.parametrize("stop_by", ["switch", "window blur"])
 def test_hold_to_move_is_select_to_start_select_to_stop_while_scanning(page, arm, stop_by):
     with_settings(page, "joint", enabled=True)

@@ -11,7 +11,7 @@ from asibot.messages import ArmState, Pose2D
 from asibot.testing import Inbox, wait_until
 
 from . import switch
-from .conftest import fresh_page, screenshot
+from .conftest import fresh_page, http, screenshot
 from .test_access import APARTMENT_VIEWS, READY, axe
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
@@ -161,8 +161,16 @@ def test_the_fridge_is_a_few_presses_from_home_and_the_trip_is_shown_on_the_map(
         wait_until(lambda: (_nav(apartment)["status"] or {}).get("state") == "active", timeout=10,
                    message="the trip did not start")
         page.wait_for_function("document.querySelector('#for-me .now-words').innerText.includes('fridge')")
+        # The places are buttons on the map too (scan targets): where each one is.
+        places = http(apartment, "GET", "api/base/pioneer-sim/places")["places"]
+        page.wait_for_function("(n) => document.querySelectorAll('#for-me .map-place').length === n", arg=len(places))
+        fridge = page.locator("#for-me .map-place[data-place=fridge]")
+        assert fridge.get_attribute("aria-label") == "Go to fridge on the map"
         assert switch.ringed(page) == ["Emergency stop Esc"], "after Go the ring is on the stop, not on Cancel"
         screenshot(page, "switch-home-trip")
+        presses.to("Go to desk on the map")                           # another place, chosen on the map
+        wait_until(lambda: "desk" in ((_nav(apartment)["status"] or {}).get("text") or ""), timeout=10,
+                   message="choosing the desk on the map did not send the robot there")
         presses.to("Cancel the trip")
         wait_until(lambda: (_nav(apartment)["status"] or {}).get("state") != "active", timeout=10,
                    message="the trip was not canceled")

@@ -50,14 +50,18 @@ function nowPanel() {
     }).catch((e) => notify(e.message));
   };
   const trip = (robot, place) => {
-    const map = new MapView(robot, () => {});
+    // Another place chosen on the map (a touch, a switch, a dwell) sends the robot there instead.
+    const map = new MapView(robot, () => {}, (place) => attempt(async () => {
+      await api.post(paths.base.goto(robot), { place: place.name });
+      trip(robot, place.name);
+    }));
     map.canvas.setAttribute('aria-label', `Map of ${robot}'s home: the robot in blue, the way it goes as a blue line.`);
     showing = { kind: 'trip', robot, place, map };
     node.hidden = false;
     words.textContent = `On the way to ${place}…`;
     stop.textContent = 'Cancel the trip';
     stop.onclick = () => attemptOn(robot, (id) => api.post(paths.base.cancel(id)), 'Trip canceled.');
-    picture.replaceChildren(el('div', { class: 'map-box' }, map.canvas));
+    picture.replaceChildren(el('div', { class: 'map-box' }, map.node));
     map.load().then(() => api.get(paths.base.places(robot))).then(({ places }) => map.update(state.robots.get(robot)?.nav, places))
       .catch((e) => notify(e.message));
   };

@@ -2,6 +2,7 @@
 // emergency stop (button and Esc key: estop.js), and the live feed that keeps every view current.
 import { api, chosenRobot, connectFeed, onChange, onMessage, paths, state } from './api.js';
 import { mountConnection } from './connection.js';
+import { startDwell } from './dwell.js';
 import { startEmergencyStop } from './estop.js';
 import { startScanning } from './scanning.js';
 import { about, el, notify } from './ui.js';
@@ -68,6 +69,7 @@ async function start() {
   tabs();
   mountConnection(document.getElementById('connection'));
   startScanning();
+  startDwell();
   startEmergencyStop();
   window.addEventListener('hashchange', () => show(location.hash.slice(1)));
   let shownRobot;

@@ -1,7 +1,9 @@
 // A mobile robot's map, drawn on a canvas: the map's grid once, then the live layers (where the
 // robot is and how sure, its particles, what its scan sees, the way it plans, the goal) and the
-// named places. Tapping the map hands the caller a point of it (m). The Base page and Home's
-// trips show it; statusText says the nav service's state in words.
+// named places. Tapping the map hands the caller a point of it (m). Each named place is also a
+// button on the map (`onPlace`), so a keyboard, a switch or a dwell chooses a place on the map as
+// a touch does. The Base page and Home's trips show it (`node`); statusText says the nav
+// service's state in words.
 import { api, paths } from './api.js';
 import { el, notify } from './ui.js';
 
@@ -10,8 +12,9 @@ const PX_PER_CELL = 3;
 
 // The map: its grid drawn once into an image, the live layers on top at every update.
 export class MapView {
-  constructor(robotId, onTap) {
+  constructor(robotId, onTap, onPlace) {
     this.robotId = robotId;
+    this.onPlace = onPlace;
     this.canvas = el('canvas', {
       class: 'map', role: 'img',
       'aria-label': 'Map of the robot\'s home: the robot in blue, the planned way as a blue line, what it sees in red. Tap a free spot to send it there.',
@@ -26,6 +29,26 @@ export class MapView {
     this.live = null;
     this.places = [];
     this.frame = 0;
+    this.targets = el('div', { class: 'map-places', role: 'group', 'aria-label': 'Places on the map' });
+    this.node = el('div', { class: 'map-stage' }, this.canvas, this.targets);
+  }
+
+  // The places as buttons where they are on the map (in % of it: they follow its size).
+  placeButtons() {
+    if (!this.grid) return;
+    this.targets.replaceChildren(...this.places.map((p) => {
+      const [px, py] = this.toPx(p.pose[0], p.pose[1]);
+      // Above its spot (the robot standing there stays seen; below it at the top), and inside
+      // the map at its edges.
+      const x = px / this.canvas.width, y = py / this.canvas.height;
+      const tx = x < 0.2 ? '-12px' : x > 0.8 ? 'calc(-100% + 12px)' : '-50%';
+      const ty = y < 0.2 ? '6px' : 'calc(-100% - 6px)';
+      return el('button', {
+        type: 'button', class: 'map-place', 'aria-label': `Go to ${p.name} on the map`, dataset: { place: p.name },
+        style: `left: ${(100 * x).toFixed(2)}%; top: ${(100 * y).toFixed(2)}%; transform: translate(${tx}, ${ty})`,
+        onclick: () => this.onPlace(p),
+      }, p.name);
+    }));
   }
 
   async load() {
@@ -46,6 +69,7 @@ export class MapView {
     this.stamp = g.stamp;
     this.canvas.width = g.width * PX_PER_CELL;
     this.canvas.height = g.height * PX_PER_CELL;
+    if (this.onPlace) this.placeButtons();
     this.draw();
   }
 
@@ -68,7 +92,7 @@ export class MapView {
       this.loading = true;
       this.load().catch((e) => notify(e.message)).finally(() => { this.loading = false; });
     }
-    if (places) this.places = places;
+    if (places) { this.places = places; if (this.onPlace) this.placeButtons(); }
     if (!this.frame) this.frame = requestAnimationFrame(() => { this.frame = 0; this.draw(); });
   }
 
@@ -84,7 +108,9 @@ export class MapView {
       ctx.beginPath(); ctx.arc(px, py, 5, 0, 2 * Math.PI); ctx.fill();
     }
     this.drawLive(scale);
-    // The places' names last, on a white edge: the robot standing at one never hides its name.
+    // The places' names last, on a white edge: the robot standing at one never hides its name
+    // (or, as buttons, over the map).
+    if (this.onPlace) return;
     ctx.font = '600 14px system-ui, sans-serif';
     ctx.lineWidth = 4; ctx.strokeStyle = '#ffffff'; ctx.fillStyle = '#13202b';
     for (const p of this.places) {

@@ -12,26 +12,17 @@
 // Controls that act while held (jog "Hold to move") take the 'scan:select' event: they start, and
 // the next press of any switch stops them (select-to-start, select-to-stop). When scanning is off
 // this module does nothing at all: no listener acts, no key is taken.
+import { ACTIONABLE, chooseControl, usable } from './choose.js';
 import { emergencyStop } from './estop.js';
 import { onSettings, settings } from './settings.js';
 import { el } from './ui.js';
 
 // Ringed first at every level that starts over: the stop, and Release all while a robot is stopped.
 const FIRST = ['estop', 'release-all'];
-const ACTIONABLE = 'button, a[href], input:not([type=hidden]), select, textarea, [contenteditable="true"], [role=button]';
 const MAX_GROUP = 8;          // a group with more controls than this is scanned row by row inside
-const TEXT_INPUTS = new Set(['text', 'number', 'search', 'email', 'url', 'tel', 'password']);
 export const MOUSE_BUTTONS = ['Left mouse button', 'Middle mouse button', 'Right mouse button', 'Back mouse button', 'Forward mouse button'];
 
 // --- what can be scanned -----------------------------------------------------------------------
-function usable(node) {
-  if (node.disabled || node.closest('[inert]')) return false;
-  if (!node.checkVisibility({ visibilityProperty: true })) return false;
-  const r = node.getBoundingClientRect();
-  // Off-page elements (the skip link waits at left: -999px) are for keyboards, not for switches.
-  return r.width > 0 && r.height > 0 && r.right + window.scrollX > 0 && r.bottom + window.scrollY > 0;
-}
-
 function controls(root) {
   return [...root.querySelectorAll(ACTIONABLE)].filter((n) => !FIRST.includes(n.id) && !n.closest('#scan-ring') && usable(n));
 }
@@ -347,23 +338,9 @@ function latch(stopIt) {
 
 function activate(node) {
   beep(990, 90);
-  const asked = new CustomEvent('scan:select', { cancelable: true, detail: { latch } });
-  if (!node.dispatchEvent(asked)) {
+  if (chooseControl(node, latch) === 'latched') {
     if (!scan.latched && scan.running) afterSelect();    // the control acted and did not latch
     return;
-  }
-  if (node.tagName === 'SELECT') {
-    // A drop-down list cannot be opened by a script: each select picks the next choice.
-    node.selectedIndex = (node.selectedIndex + 1) % node.options.length;
-    node.dispatchEvent(new Event('input', { bubbles: true }));
-    node.dispatchEvent(new Event('change', { bubbles: true }));
-  } else if (node.tagName === 'TEXTAREA' || node.isContentEditable || (node.tagName === 'INPUT' && TEXT_INPUTS.has(node.type))) {
-    node.focus();    // typing needs a keyboard (the system's on-screen one types here)
-  } else {
-    node.focus({ preventScroll: true });
-    node.click();
-    // The ring is the one marker: a focus outline left on what was selected would be a second one.
-    if (document.activeElement === node) node.blur();
   }
   if (scan.running) afterSelect();    // the select may have turned scanning off
 }

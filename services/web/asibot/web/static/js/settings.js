@@ -16,6 +16,7 @@ export const LIMITS = {
   rounds: [1, 10, 1],
   doubleTapMs: [100, 1000, 50],
   holdStopMs: [0, 10000, 500],
+  dwellMs: [0, 5000, 250],
 };
 
 // The choices of each multiple-choice setting, in the order the Access page shows them.
@@ -48,6 +49,8 @@ export const DEFAULTS = Object.freeze({
   doubleTapMs: 350,
   // A press held this long (ms) stops every robot; 0: off (a person with a tremor may hold on).
   holdStopMs: 0,
+  // A pointer resting this long (ms) on a control chooses it (eye-gaze, a head pointer); 0: off.
+  dwellMs: 0,
 });
 
 const NAMES = {
@@ -56,7 +59,7 @@ const NAMES = {
   afterSelect: 'what happens after a select', messages: 'how messages go away',
   next: 'the next switch', select: 'the select switch', enabled: 'scanning on or off', sound: 'the beep',
   scope: 'what the ring goes over', doubleTapStop: 'two quick taps stop', doubleTapMs: 'the time between two quick taps (ms)',
-  holdStopMs: 'the long hold that stops (ms)',
+  holdStopMs: 'the long hold that stops (ms)', dwellMs: 'the dwell time (ms)',
 };
 
 class Invalid extends Error {}

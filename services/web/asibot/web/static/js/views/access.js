@@ -138,7 +138,8 @@ export default {
       number('intervalMs', 'Scanning time, automatic', 'ms'), number('holdMs', 'Hold to select, one switch', 'ms'),
       number('rounds', 'Rounds before scanning stops', null), choice('afterSelect'), choice('sound'),
       choice('doubleTapStop'), number('doubleTapMs', 'Two quick taps: at most this apart', 'ms'),
-      number('holdStopMs', 'A hold this long stops every robot, 0: off', 'ms')];
+      number('holdStopMs', 'A hold this long stops every robot, 0: off', 'ms'),
+      number('dwellMs', 'Dwell to choose (eye-gaze, head pointer), 0: off', 'ms')];
     const order = orderPanel();
     const messages = choice('messages');
     const upload = el('input', { type: 'file', accept: '.json,application/json' });

@@ -93,7 +93,8 @@ export default {
       el('p', {}, 'No mobile robot is connected. `asibot up` starts pioneer-sim, the Pioneer P3-AT in the apartment.')));
     const build = (robot) => {
       const map = new MapView(robot.id, (p) => attemptOn(robot.id, (id) => api.post(paths.base.goto(id), { x: p.x, y: p.y }),
-        `On the way to (${p.x.toFixed(1)}, ${p.y.toFixed(1)}).`));
+        `On the way to (${p.x.toFixed(1)}, ${p.y.toFixed(1)}).`),
+      (place) => attemptOn(robot.id, (id) => api.post(paths.base.goto(id), { place: place.name }), `On the way to ${place.name}.`));
       const status = el('p', { class: 'big nav-status', role: 'status', 'aria-live': 'polite' });
       const cancel = el('button', { type: 'button', class: 'danger', onclick: () => attemptOn(robot.id, (id) => api.post(paths.base.cancel(id)), 'Canceled.') }, 'Cancel the trip');
       const events = el('ul', { class: 'events', 'aria-label': 'What the robot said' });
@@ -102,7 +103,7 @@ export default {
       root.replaceChildren(el('p', { class: 'big' }, `This page drives ${robot.id}.`),
         el('div', { class: 'columns' },
           el('div', {},
-            el('section', { class: 'panel', 'aria-label': 'Map' }, el('h2', {}, 'Map'), el('div', { class: 'map-box' }, map.canvas),
+            el('section', { class: 'panel', 'aria-label': 'Map' }, el('h2', {}, 'Map'), el('div', { class: 'map-box' }, map.node),
               status, el('div', { class: 'row' }, cancel)),
             el('section', { class: 'panel', 'aria-label': 'Messages' }, el('h2', {}, 'Messages'), events)),
           el('div', {}, drive.panel, places)));
