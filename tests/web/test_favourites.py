@@ -42,6 +42,17 @@ def test_uses_and_the_order_are_kept_and_a_hand_edited_file_keeps_what_makes_sen
     assert kept.uses == {"task:a": 3} and kept.order == ["task:a"]
     (tmp_path / FILE).write_text("{not json")
     assert fav.read() == Usage({}, [])
+    assert (tmp_path / (FILE + ".unreadable")).read_text() == "{not json"   # kept aside, not lost
+    fav.used(task_key("a"))
+    assert fav.read().uses == {"task:a": 1}
+
+
+def test_a_use_that_cannot_be_counted_never_fails_what_it_counts(tmp_path):
+    fav = Favourites(Folder(tmp_path))
+    fav.used("not a key")                                  # logged, not raised
+    (tmp_path / FILE).mkdir()                              # the file cannot be written
+    fav.used(task_key("a"))                                # logged, not raised; nothing else touched
+    assert (tmp_path / FILE).is_dir() and sorted(p.name for p in tmp_path.iterdir()) == [FILE]
 
 
 @pytest.mark.parametrize("order,words", [

@@ -8,7 +8,6 @@ user's folder (userdata/favourites.py).
 
 from __future__ import annotations
 
-import logging
 from typing import Annotated
 
 from fastapi import APIRouter, Request
@@ -21,7 +20,6 @@ from asibot.web.routing import off_loop, web_of
 from asibot.web.userdata.favourites import MAX_KEY, MAX_KEYS, place_key, task_key
 
 router = APIRouter(prefix="/api")
-log = logging.getLogger("asibot.web")
 
 #: A robot's nav answers its places at once; one that does not is left out, not waited for.
 PLACES_TIMEOUT = 2.0

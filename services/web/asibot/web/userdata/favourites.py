@@ -17,7 +17,9 @@ A file edited by hand keeps what makes sense and leaves the rest out.
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
 from dataclasses import dataclass
 
 from asibot.files import write_atomic
@@ -78,7 +80,11 @@ class Favourites:
                 try:
                     raw = json.loads(path.read_text(encoding="utf-8"))
                 except (OSError, ValueError) as exc:
-                    log.warning("%s left out: it is not JSON (%s)", FILE, exc)
+                    # Kept aside, not overwritten by the next count: a carer's hand edit is not lost.
+                    aside = path.with_name(FILE + ".unreadable")
+                    log.warning("%s is not JSON (%s): kept as %s, counting starts again", FILE, exc, aside.name)
+                    with contextlib.suppress(OSError):
+                        os.replace(path, aside)
             raw = raw if isinstance(raw, dict) else {}
             uses, order = raw.get("uses"), raw.get("order")
             kept_uses = {k: v for k, v in (uses.items() if isinstance(uses, dict) else ())
@@ -91,15 +97,19 @@ class Favourites:
                      (json.dumps({"uses": usage.uses, "order": usage.order}, indent=1) + "\n").encode())
 
     def used(self, key: str) -> None:
-        """Count one use of `key` (a launch, a trip)."""
-        check_key(key)
-        with self.folder.lock:
-            usage = self.read()
-            if key not in usage.uses and len(usage.uses) >= MAX_KEYS:
-                # Forget the least used: what is used now matters more.
-                del usage.uses[min(usage.uses, key=usage.uses.__getitem__)]
-            usage.uses[key] = usage.uses.get(key, 0) + 1
-            self._write(usage)
+        """Count one use of `key` (a launch, a trip). It never raises: the launch or the trip it
+        counts has happened, and a full disk must not make it look refused."""
+        try:
+            check_key(key)
+            with self.folder.lock:
+                usage = self.read()
+                if key not in usage.uses and len(usage.uses) >= MAX_KEYS:
+                    # Forget the least used: what is used now matters more.
+                    del usage.uses[min(usage.uses, key=usage.uses.__getitem__)]
+                usage.uses[key] = usage.uses.get(key, 0) + 1
+                self._write(usage)
+        except (OSError, UserDataError) as exc:
+            log.warning("a use of %r was not counted: %s", key, exc)
 
     def set_order(self, order: list[str]) -> Usage:
         """The carer's order (an empty list: by use alone); a bad key changes nothing."""

@@ -8,6 +8,13 @@
 export const ACTIONABLE = 'button, a[href], input:not([type=hidden]), select, textarea, [contenteditable="true"], [role=button]';
 const TEXT_INPUTS = new Set(['text', 'number', 'search', 'email', 'url', 'tel', 'password']);
 
+// Whether `node` takes typed text: a text field, a text area or an editor (contenteditable).
+export function takesText(node) {
+  if (!node || node === document.body) return false;
+  if (node.tagName === 'TEXTAREA' || node.isContentEditable) return true;
+  return node.tagName === 'INPUT' && TEXT_INPUTS.has(node.type);
+}
+
 // Whether a person can choose `node` now: enabled, shown, on the page.
 export function usable(node) {
   if (node.disabled || node.closest('[inert]')) return false;
@@ -27,7 +34,7 @@ export function chooseControl(node, latch) {
     node.selectedIndex = (node.selectedIndex + 1) % node.options.length;
     node.dispatchEvent(new Event('input', { bubbles: true }));
     node.dispatchEvent(new Event('change', { bubbles: true }));
-  } else if (node.tagName === 'TEXTAREA' || node.isContentEditable || (node.tagName === 'INPUT' && TEXT_INPUTS.has(node.type))) {
+  } else if (takesText(node)) {
     node.focus();    // typing needs a keyboard (the system's on-screen one types here)
   } else {
     node.focus({ preventScroll: true });

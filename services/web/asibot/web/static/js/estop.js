@@ -11,9 +11,9 @@
 // same when its keymap closes something), never with stopPropagation(): this listener must hear
 // every Esc to keep the second one a stop.
 import { api, connectedRobots, onChange, paths } from './api.js';
+import { takesText } from './choose.js';
 import { attempt, notify } from './ui.js';
 
-const TEXT_INPUTS = new Set(['text', 'number', 'search', 'email', 'url', 'tel', 'password']);
 const MODIFIERS = new Set(['Shift', 'Control', 'Alt', 'Meta', 'AltGraph', 'CapsLock']);
 
 export async function emergencyStop() {
@@ -51,13 +51,6 @@ function showStopped(button) {
   });
 }
 
-// Whether `node` takes typed text: a text field, a text area or an editor (contenteditable).
-function typing(node) {
-  if (!node || node === document.body) return false;
-  if (node.tagName === 'TEXTAREA' || node.isContentEditable) return true;
-  return node.tagName === 'INPUT' && TEXT_INPUTS.has(node.type);
-}
-
 export function startEmergencyStop() {
   const button = document.getElementById('estop');
   const hint = document.getElementById('estop-hint');
@@ -75,7 +68,7 @@ export function startEmergencyStop() {
   // Bubbling, on the document: the editor, a list or a name being changed saw the key first.
   document.addEventListener('keydown', (e) => {
     if (e.key !== 'Escape') return;
-    if (armed || !(e.defaultPrevented || typing(e.target))) {
+    if (armed || !(e.defaultPrevented || takesText(e.target))) {
       arm(false);
       emergencyStop();
       return;

@@ -506,7 +506,9 @@ export function captureSwitch(cancel) {
 export function describe(s = settings()) {
   const how = s.switches === 2 ? `${s.next.label} moves on, ${s.select.label} selects`
     : s.mode === 'auto' ? `press ${s.next.label} to select` : `tap ${s.next.label} to move on, hold it to select`;
-  const stops = [s.doubleTapStop && s.mode === 'step' ? `${s.switches === 2 ? s.next.label : 'tap it'} twice quickly` : '',
+  // Two quick taps exist where a tap only moves the ring: one switch stepping, or the next switch of two.
+  const taps = s.switches === 2 || s.mode === 'step';
+  const stops = [s.doubleTapStop && taps ? `${s.switches === 2 ? s.next.label : 'tap it'} twice quickly` : '',
     s.holdStopMs ? `hold it ${s.holdStopMs / 1000} s` : ''].filter(Boolean);
   return stops.length ? `${how}; ${stops.join(' or ')} to stop every robot` : how;
 }
