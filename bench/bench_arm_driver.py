@@ -7,6 +7,8 @@ python-can virtual bus with a sniffer, then prints one markdown table:
   measured on the bus with each frame's exact stuffed length;
 - command-to-frame latency: ArmCommand put on Zenoh -> the RPDO carrying it on the CAN bus;
 - SYNC period jitter as seen on the bus.
+
+    python bench/bench_arm_driver.py [--quick]
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from asibot.arm_driver.service import ArmDriverService
 from asibot.bus import Bus
 from asibot.messages import ArmCommand, ArmState
 
-from table import print_table  # bench/table.py: run as `python bench/<name>.py`
+from table import QUICK_HELP, print_table  # bench/table.py: run as `python bench/<name>.py`
 
 
 class Sniffer(can.Listener):
@@ -74,7 +76,10 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--seconds", type=float, default=3.0, help="bus-load measuring window")
     ap.add_argument("--samples", type=int, default=200, help="latency samples")
+    ap.add_argument("--quick", action="store_true", help=QUICK_HELP)
     args = ap.parse_args()
+    if args.quick:
+        args.seconds, args.samples = 0.3, 5
     logging.basicConfig(level=logging.WARNING)
     cfg = config.load("asibot")
     channel = f"bench-{uuid.uuid4().hex[:8]}"

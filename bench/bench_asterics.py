@@ -28,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from table import print_table  # noqa: E402
+from table import QUICK_HELP, print_table  # noqa: E402
 
 from asibot import keys  # noqa: E402
 from asibot import messages as m  # noqa: E402
@@ -153,9 +153,9 @@ def sustained(port: int, clients: int, seconds: float, burst: int = 8) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--quick", action="store_true", help="fewer samples")
+    ap.add_argument("--quick", action="store_true", help=QUICK_HELP)
     quick = ap.parse_args().quick
-    n, seconds = (100, 2.0) if quick else (1000, 10.0)
+    n, seconds = (5, 0.5) if quick else (1000, 10.0)
     endpoint = "mem://bench-asterics"
     bus, svc_bus = Bus("bench", endpoint), Bus("asterics_bridge", endpoint)
     FakeNav(bus, ROBOT)

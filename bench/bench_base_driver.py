@@ -3,10 +3,13 @@
 Prints one markdown table: ARCOS command round trip (VEL sent -> the next SIP shows the
 robot reacting; bounded by the 100 ms SIP cycle, docs/arcos.md "SIP"), SIP parse time, and the
 latency from a cmd_vel published on Zenoh to its VEL bytes arriving on the serial line.
+
+    python bench/bench_base_driver.py [--quick]
 """
 
 from __future__ import annotations
 
+import argparse
 import random
 import statistics
 import sys
@@ -27,7 +30,7 @@ from asibot.base_driver.service import BaseDriverService
 from asibot.base_driver.sip import Sip, encode_sip, parse_sip
 from asibot.base_driver.state import StateTracker
 
-from table import print_table  # bench/table.py: run as `python bench/<name>.py`
+from table import QUICK_HELP, print_table  # bench/table.py: run as `python bench/<name>.py`
 
 
 def pct(values: list[float], q: float) -> float:
@@ -78,12 +81,11 @@ def round_trip(samples: int = 40) -> list[float]:
     return out
 
 
-def parse_time() -> tuple[float, float]:
+def parse_time(n: int = 20000) -> tuple[float, float]:
     """us per parse_sip and per parse + conversion to SI, for a full SIP (16 sonars + tail)."""
     payload = encode_sip(Sip(moving=True, xpos=1234, ypos=32000, thpos=512, left_vel=300, right_vel=320,
                              battery=128, sonars={i: 1000 + i for i in range(16)},
                              battery_x10=128, rot_vel_x10=40))
-    n = 20000
     t_parse = timeit.timeit(lambda: parse_sip(payload), number=n) / n * 1e6
     tracker = StateTracker(P3AT_SH)
     t_full = timeit.timeit(lambda: tracker.update(parse_sip(payload)), number=n) / n * 1e6
@@ -128,9 +130,12 @@ def cmd_vel_latency(samples: int = 200) -> list[float]:
 
 
 def main() -> int:
-    rt = round_trip()
-    t_parse, t_full = parse_time()
-    lat = cmd_vel_latency()
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help=QUICK_HELP)
+    quick = ap.parse_args().quick
+    rt = round_trip(3 if quick else 40)
+    t_parse, t_full = parse_time(100 if quick else 20000)
+    lat = cmd_vel_latency(5 if quick else 200)
     rows = [
         ("ARCOS command round trip p50 (VEL -> next SIP reflects it)", f"{statistics.median(rt):.1f}", "ms", "<= 100 (one SIP cycle; 50 expected)"),
         ("ARCOS command round trip p99", f"{pct(rt, 99):.1f}", "ms", "<= 110 (one 100 ms SIP cycle + 10)"),

@@ -25,6 +25,8 @@ from asibot.bus.zenoh_backend import client_config
 from asibot.recorder.recorder import RecorderService
 from asibot.testing import router
 
+from table import QUICK_HELP  # bench/table.py: run as `python bench/<name>.py`
+
 ECHO = r"""
 import sys, threading, zenoh
 from asibot import messages as m
@@ -208,9 +210,9 @@ def raw_receive_rate(endpoint: str, n: int) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--quick", action="store_true", help="fewer samples (CI smoke run)")
+    ap.add_argument("--quick", action="store_true", help=QUICK_HELP)
     args = ap.parse_args()
-    n_small, n_big, n_rpc, n_flood = (100, 10, 100, 20000) if args.quick else (1000, 50, 1000, 200000)
+    n_small, n_big, n_rpc, n_flood = (5, 2, 5, 2000) if args.quick else (1000, 50, 1000, 200000)
     rows = []
     with router() as endpoint:
         for mode in ("ours", "raw"):

@@ -5,10 +5,13 @@ Two set-ups on a real Zenoh router, one markdown table:
   in their own process, the client and an observer of `arm/command` in this one;
 - all in one process (server, driver, client), where the control loop's period is measured
   directly; every thread shares one GIL there, so its latencies are a pessimistic bound.
+
+    python bench/bench_control.py [--quick]
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import subprocess
 import sys
@@ -24,7 +27,7 @@ from asibot.kinematics.model import solver_for
 from asibot.messages import ArmCommand
 from asibot.testing import IdealDriver
 
-from table import print_table  # bench/table.py: run as `python bench/<name>.py`
+from table import QUICK_HELP, print_table  # bench/table.py: run as `python bench/<name>.py`
 
 ROBOT = "asibot-sim"
 START = np.radians([0, 30, 40, 30, 0])
@@ -58,10 +61,14 @@ def pct(values: list[float], q: float) -> float:
     return float(np.percentile(np.asarray(values), q))
 
 
+#: (stat round trips, movv commands, seconds of the movj whose loop periods are measured)
+SAMPLES = (300, 150, 3.0)
+
+
 def measure(client: CartesianClient, observer: Bus) -> tuple[list[float], list[float]]:
     """(stat round trips, client.movv -> first arm/command), in seconds."""
     rtt = []
-    for _ in range(300):
+    for _ in range(SAMPLES[0]):
         t0 = time.perf_counter()
         client.stat()
         rtt.append(time.perf_counter() - t0)
@@ -71,7 +78,7 @@ def measure(client: CartesianClient, observer: Bus) -> tuple[list[float], list[f
                        lambda m: (got.append(time.perf_counter()), arrived.set()))
     time.sleep(0.3)
     path = []
-    for _ in range(150):
+    for _ in range(SAMPLES[1]):
         client.stop()
         time.sleep(0.03)
         arrived.clear()
@@ -117,7 +124,7 @@ def raw_floor(endpoint: str) -> list[float]:
                                          lambda sample: (got.append(time.perf_counter()), arrived.set()))
         time.sleep(0.3)
         path = []
-        for _ in range(150):
+        for _ in range(SAMPLES[1]):
             time.sleep(0.03)
             arrived.clear()
             got.clear()
@@ -146,7 +153,7 @@ def in_process() -> tuple[dict, list[float], list[float]]:
     try:
         rtt, path = measure(client, observer)
         server.ticker._periods.clear()
-        client.movj(joints=[10, 20, 30, 20, 10], duration=3.0)
+        client.movj(joints=[10, 20, 30, 20, 10], duration=SAMPLES[2])
         client.wait(timeout=10)
         return server.ticker.stats(), rtt, path
     finally:
@@ -158,6 +165,11 @@ def in_process() -> tuple[dict, list[float], list[float]]:
 
 
 def main() -> int:
+    global SAMPLES
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help=QUICK_HELP)
+    if ap.parse_args().quick:
+        SAMPLES = (5, 5, 0.3)
     with testing.router() as endpoint:
         os.environ["ASIBOT_ROUTER"] = endpoint
         d_rtt, d_path = deployed()

@@ -26,7 +26,7 @@ import uvicorn
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
 
-from table import print_table  # noqa: E402
+from table import QUICK_HELP, print_table  # noqa: E402
 
 from asibot import keys, robots  # noqa: E402
 from asibot.bus import Bus  # noqa: E402
@@ -53,9 +53,9 @@ def pct(values: list[float], q: float) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="a few presses: check that the bench runs")
+    parser.add_argument("--quick", action="store_true", help=QUICK_HELP)
     args = parser.parse_args()
-    presses = 6 if args.quick else 200
+    presses = 2 if args.quick else 200
     with memory_bus("bench-guard"), tempfile.TemporaryDirectory() as data:
         spec = robots.get(ROBOT)
         driver = IdealDriver(ROBOT, spec)

@@ -23,10 +23,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
 
-from table import print_table, times  # noqa: E402
+from table import QUICK_HELP, print_table, times  # noqa: E402
 
 from asibot import keys  # noqa: E402
-from asibot.safety import ownership
+from asibot.safety import ownership  # noqa: E402
 from asibot.bus import Bus  # noqa: E402
 from asibot.messages import ArmCommand  # noqa: E402
 from asibot.testing import memory_bus, wait_until  # noqa: E402
@@ -37,9 +37,9 @@ VALUES = [0.1, 0.2, 0.3, 0.4, 0.5]
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="a few commands: check that the bench runs")
+    parser.add_argument("--quick", action="store_true", help=QUICK_HELP)
     args = parser.parse_args()
-    runs = 50 if args.quick else 2000
+    runs = 5 if args.quick else 2000
     me = ownership.Controller(ROBOT, "arm", "bench")
     holder = ownership.Holder(ROBOT, "arm")
     holder.update(keys.controller_alive(ROBOT, me.id), True)

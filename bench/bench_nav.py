@@ -6,10 +6,13 @@ map 50 ms. The references are what a straightforward port would do: the likeliho
 particle at a time, Dijkstra with Python's heapq, the controller one trajectory at a time,
 the bare distance transform under the inflation, and a mapping scan raytraced beam by beam
 (Bresenham).
+
+    python bench/bench_nav.py [--quick]
 """
 
 from __future__ import annotations
 
+import argparse
 import heapq
 import math
 import statistics
@@ -30,14 +33,15 @@ from asibot.nav.mapping import Mapper
 from asibot.nav.planner import GlobalPlanner
 from asibot.nav.places import Places, world_places_file
 
-from table import print_table  # bench/table.py: run as `python bench/<name>.py`
+from table import QUICK_HELP, print_table  # bench/table.py: run as `python bench/<name>.py`
 
 MAP = Path(__file__).resolve().parents[1] / "libs" / "common" / "asibot" / "maps" / "apartment.yaml"
+QUICK = False
 
 
 def p50_ms(fn, repeat: int = 30) -> float:
     times = []
-    for _ in range(repeat):
+    for _ in range(1 if QUICK else repeat):
         t0 = time.perf_counter()
         fn()
         times.append(time.perf_counter() - t0)
@@ -145,6 +149,10 @@ def bresenham_scan(logodds: np.ndarray, info: GridInfo, pose: Pose, scan: LaserS
 
 
 def main() -> None:
+    global QUICK
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help=QUICK_HELP)
+    QUICK = ap.parse_args().quick
     apartment = load_map(MAP).grid
     places = Places(Path("/nonexistent/places.yaml"), world_places_file())
     station = places.get("charging station").pose

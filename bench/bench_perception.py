@@ -7,11 +7,12 @@ it measures the work, not the transport. The references are measured in the same
 the same image: depthimage_to_laserscan's centre row (what this replaces) and a bare numpy
 minimum down the columns (the floor of any per-column reduction).
 
-Run: `.venv/bin/python bench/bench_perception.py`
+Run: `.venv/bin/python bench/bench_perception.py [--quick]`
 """
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
 from typing import Callable
@@ -30,14 +31,15 @@ from asibot.perception.warnings import ObstacleWarner, clearance  # noqa: E402
 from asibot.sim.cameras import Camera  # noqa: E402
 from asibot.sim.simulation import Simulation  # noqa: E402
 
-from table import print_table, times  # bench/table.py: run as `python bench/<name>.py`
+from table import QUICK_HELP, print_table, times  # bench/table.py: run as `python bench/<name>.py`
 
 ROWS: list[tuple[str, str, str, str, str]] = []
+QUICK = False
 
 
 def timed(fn: Callable[[], object], runs: int) -> tuple[float, float]:
     """(median, p95) of `runs` calls in ms, after a few warm-up calls."""
-    t = times(fn, runs, warmup=3)
+    t = times(fn, 2, warmup=1) if QUICK else times(fn, runs, warmup=3)
     return float(np.median(t)) * 1e3, float(np.percentile(t, 95)) * 1e3
 
 
@@ -47,6 +49,10 @@ def row(what: str, fn: Callable[[], object], budget: str, runs: int = 300) -> No
 
 
 def main() -> None:
+    global QUICK
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help=QUICK_HELP)
+    QUICK = ap.parse_args().quick
     sim = Simulation("pioneer-sim", odom_noise=(0.0, 0.0))
     body = sim.scene.base.body
     place = np.array([0.2, 0.9, 0.15])               # in the living room, the coffee table and can ahead
@@ -118,8 +124,9 @@ def main() -> None:
 def info_of(r: CameraRays):
     """The CameraInfo a CameraRays was made from (to time building one)."""
     from asibot.messages import CameraInfo
-    w, h, fx, fy, cx, cy, pose = r.key
-    return CameraInfo(width=w, height=h, fx=fx, fy=fy, cx=cx, cy=cy, pose=list(pose))
+    # The key holds the pose's seven numbers flat (rays._key), so that _same compares each.
+    w, h, fx, fy, cx, cy, *pose = r.key
+    return CameraInfo(width=w, height=h, fx=fx, fy=fy, cx=cx, cy=cy, pose=pose)
 
 
 if __name__ == "__main__":

@@ -12,10 +12,13 @@ lines, compose.yaml):
 3. memory under the fuzzer: VmRSS of a kinematics process before and after malformed and
    oversized requests (up to 8 MB) to every verb of keys.RPC_VERBS_CART, against the same
    number of valid `stat` requests, with the replies counted by error code.
+
+    python bench/bench_safety.py [--quick]
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import random
 import shutil
@@ -40,7 +43,7 @@ from asibot.kinematics import requests
 from asibot.messages import COMMAND_WATCHDOG_S, ArmState, Event, Odometry, Twist
 from asibot.base_driver.emulator.robot import SIP_PERIOD, TRANS_ACCEL
 
-from table import print_table  # bench/table.py: run as `python bench/<name>.py`
+from table import QUICK_HELP, print_table  # bench/table.py: run as `python bench/<name>.py`
 
 #: The only CAN arm the catalog and arm_driver/robots/*.yaml know; the private router keeps
 #: this run apart from any stack using the same id.
@@ -462,6 +465,11 @@ def memory_rows(mem: dict[str, object]) -> list[tuple]:
 
 
 def main() -> int:
+    global REPS, FUZZ_REQUESTS
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help=QUICK_HELP)
+    if ap.parse_args().quick:
+        REPS, FUZZ_REQUESTS = 1, FUZZ_QUARTERS          # one request a quarter: VmRSS is read after each
     rng = random.Random(10)         # issue 10
     procs = Processes()
     events = Trace()

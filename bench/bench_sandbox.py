@@ -11,7 +11,7 @@ runner used before it:
    left (`stop()` returns then); the budget is 100 ms. The plain subprocess's figure is its
    process-group kill, after which the escaped children are still running (counted).
 
-    python bench/bench_sandbox.py [--runs N]
+    python bench/bench_sandbox.py [--runs N] [--quick]
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from table import print_table  # noqa: E402  bench/table.py: run as `python bench/<name>.py`
+from table import QUICK_HELP, print_table  # noqa: E402  bench/table.py: run as `python bench/<name>.py`
 
 from asibot.testing import ESCAPING_PROGRAM, processes_with  # noqa: E402
 from asibot.web.runner import Limits, ProgramRunner, _limiter  # noqa: E402
@@ -136,7 +136,10 @@ def plain_stop(folder: Path, runs: int) -> tuple[list[float], int]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=10)
+    parser.add_argument("--quick", action="store_true", help=QUICK_HELP)
     args = parser.parse_args()
+    if args.quick:
+        args.runs = 1
     logging.getLogger("asibot.web.sandbox").setLevel(logging.ERROR)   # each mode's "missing" line
     print("#", Sandbox().describe())
     rows = []

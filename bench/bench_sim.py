@@ -3,10 +3,13 @@
 Real-time factor is read from the sim's own Health reports (simulated seconds elapsed over
 producer-clock seconds elapsed, first to last report of the run) while the service runs as a real process with cameras at 10 Hz; CPU is
 the process's user+system time over wall time (100 % = one core of the 2).
+
+    python bench/bench_sim.py [--quick]
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import subprocess
 import sys
@@ -21,9 +24,12 @@ from asibot.bus import Bus
 from asibot.sim.cameras import Camera
 from asibot.sim.simulation import Simulation
 
-from table import print_table  # bench/table.py: run as `python bench/<name>.py`
+from table import QUICK_HELP, print_table  # bench/table.py: run as `python bench/<name>.py`
 
 RUN_S = 12.0
+WARM_UP_S = 2.0     # the cameras' first renders
+#: physics steps timed (after a fifth as many to warm up), and renders timed per image
+STEPS, RENDERS = 2500, 10
 ROWS: list[tuple[str, str, str, str]] = []
 
 
@@ -33,8 +39,8 @@ def row(what: str, value: float, unit: str, budget: str, fmt: str = "{:.2f}") ->
 
 def step_time(robot: str) -> None:
     sim = Simulation(robot)
-    sim.step(500)
-    n = 2500
+    sim.step(STEPS // 5)
+    n = STEPS
     t = time.perf_counter()
     sim.step(n)
     us = (time.perf_counter() - t) / n * 1e6
@@ -48,15 +54,16 @@ def camera_times() -> None:
         for method in ("render", "ray"):
             cam.depth(sim.data, method)
             t = time.perf_counter()
-            for _ in range(10):
+            for _ in range(RENDERS):
                 cam.depth(sim.data, method)
             row(f"depth image {w}x{h}, {'OSMesa render' if method == 'render' else 'mj_multiRay'}",
-                (time.perf_counter() - t) / 10 * 1e3, "ms", "<= 100 (10 Hz)", "{:.1f}")
+                (time.perf_counter() - t) / RENDERS * 1e3, "ms", "<= 100 (10 Hz)", "{:.1f}")
         cam.rgb_jpeg(sim.data)
         t = time.perf_counter()
-        for _ in range(10):
+        for _ in range(RENDERS):
             cam.rgb_jpeg(sim.data)
-        row(f"RGB image {w}x{h}, render + JPEG", (time.perf_counter() - t) / 10 * 1e3, "ms", "<= 100 (10 Hz)", "{:.1f}")
+        row(f"RGB image {w}x{h}, render + JPEG", (time.perf_counter() - t) / RENDERS * 1e3, "ms", "<= 100 (10 Hz)",
+            "{:.1f}")
         cam.close()
 
 
@@ -85,7 +92,7 @@ def run_worlds(robots: list[str], fast: bool = False) -> dict[str, tuple[float, 
         deadline = time.monotonic() + 40
         while time.monotonic() < deadline and not all(bus.alive(keys.driver_alive(r)) for r in robots):
             time.sleep(0.2)
-        time.sleep(2.0)  # warm-up: cameras' first renders
+        time.sleep(WARM_UP_S)
         with lock:
             for r in robots:
                 reports[r].clear()
@@ -110,6 +117,12 @@ def run_worlds(robots: list[str], fast: bool = False) -> dict[str, tuple[float, 
 
 
 def main() -> int:
+    global RUN_S, WARM_UP_S, STEPS, RENDERS
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help=QUICK_HELP)
+    if ap.parse_args().quick:
+        # Health comes every 2 s and the RTF needs two reports: shorter runs print nan for it.
+        RUN_S, WARM_UP_S, STEPS, RENDERS = 0.5, 0.0, 50, 1
     step_time("asibot-sim")
     step_time("pioneer-sim")
     camera_times()

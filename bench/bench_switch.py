@@ -14,7 +14,7 @@ carer sets it up once on Home ("Turn switch scanning on": the person's tasks and
 two quick taps stop every robot). The script takes the shortest way a person would: tap to the
 entry that holds the control, hold to open it, and so on (tests/web/switch.py).
 
-    python bench/bench_switch.py [--reference COMMIT]
+    python bench/bench_switch.py [--reference COMMIT] [--quick]
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
 sys.path.insert(0, str(ROOT))
 
-from table import print_table  # noqa: E402
+from table import QUICK_HELP, print_table  # noqa: E402
 
 from asibot.testing import Stack, wait_until  # noqa: E402
 from tests.web import switch  # noqa: E402
@@ -48,6 +48,13 @@ REFERENCE = "32b0496"
 GOALS = {"launch the red-can task": 5, "send the Pioneer to the fridge": 8,
          "emergency stop from the farthest point": 2, "release it": 3}
 STATIC = Path("services/web/asibot/web/static")
+SERVICES = ["web", "kinematics-asibot-sim", "kinematics-pioneer-sim", "nav-pioneer-sim"]
+ALIVE = [f"sim/{ARM}", f"kinematics/{ARM}", f"sim/{BASE}", f"nav/{BASE}", "web/main"]
+#: The smoke run's tasks: today's page only, and no trip, so no perception or nav to start; the
+#: red-can run is stopped once launched instead of lifting the can.
+QUICK_TASKS = ("launch the red-can task", "emergency stop from the farthest point", "release it")
+QUICK_SERVICES = ["web", "kinematics-asibot-sim", "sim-apartment"]
+QUICK_ALIVE = [f"sim/{ARM}", f"kinematics/{ARM}", f"sim/{BASE}", "web/main"]
 
 
 def old_page(commit: str, into: Path) -> Path:
@@ -67,10 +74,9 @@ def served(url: str) -> bool:
         return False
 
 
-def stack(folder: Path) -> Stack:
-    s = Stack(folder, "sim", ["web", "kinematics-asibot-sim", "kinematics-pioneer-sim", "nav-pioneer-sim"],
-              ROOT / "compose.yaml")
-    s.wait_alive(f"sim/{ARM}", f"kinematics/{ARM}", f"sim/{BASE}", f"nav/{BASE}", "web/main", timeout=120)
+def stack(folder: Path, services: list[str], alive: list[str]) -> Stack:
+    s = Stack(folder, "sim", services, ROOT / "compose.yaml")
+    s.wait_alive(*alive, timeout=120)
     wait_until(lambda: served(s.web_url), timeout=30, interval=0.3)
     s.web("PUT", "/api/programs/give_me_the_red_can", {"text": RED_CAN.read_text()})
     s.web("PUT", "/api/tasks/Give%20me%20the%20red%20can", {"program": "give_me_the_red_can", "words": [], "icon": "can.svg"})
@@ -90,8 +96,9 @@ def measured(page, act: Callable[[switch.Presses], None], done: Callable[[], boo
     return presses.count, time.monotonic() - t0
 
 
-def flows(s: Stack, page, today: bool) -> dict[str, tuple[int, float]]:
+def flows(s: Stack, page, today: bool, quick: bool) -> dict[str, tuple[int, float]]:
     out = {}
+    tasks = QUICK_TASKS if quick else tuple(GOALS)
     ready = "#for-me .favourite" if today else "text=Teach the robot a task"
     settings = {"enabled": True, "scope": "home", "doubleTapStop": True} if today else {"enabled": True}
     if not today:
@@ -114,8 +121,11 @@ def flows(s: Stack, page, today: bool) -> dict[str, tuple[int, float]]:
             p.to("Launcher")
             page.wait_for_selector(".task-button")
         p.to(f"Launch {TASK}")
-    out["launch the red-can task"] = measured(page, launch, launched)
-    wait_until(lambda: not s.web("GET", "/api/run")[1]["running"], timeout=180)
+    if "launch the red-can task" in tasks:
+        out["launch the red-can task"] = measured(page, launch, launched)
+        if quick:
+            s.web("POST", "/api/run/stop")
+        wait_until(lambda: not s.web("GET", "/api/run")[1]["running"], timeout=180)
 
     def going() -> bool:
         nav = s.web("GET", f"/api/robots/{BASE}")[1].get("nav") or {}
@@ -129,8 +139,9 @@ def flows(s: Stack, page, today: bool) -> dict[str, tuple[int, float]]:
             p.to(f"Command {BASE}")
             page.wait_for_selector(".points li[data-place=fridge]", timeout=15000)
         p.to("Go to fridge")
-    out["send the Pioneer to the fridge"] = measured(page, fridge, going)
-    s.web("POST", f"/api/base/{BASE}/cancel")
+    if "send the Pioneer to the fridge" in tasks:
+        out["send the Pioneer to the fridge"] = measured(page, fridge, going)
+        s.web("POST", f"/api/base/{BASE}/cancel")
 
     def farthest() -> None:
         """The ring inside the first row of tabs, on its first entry: the farthest from the stop."""
@@ -162,30 +173,36 @@ def flows(s: Stack, page, today: bool) -> dict[str, tuple[int, float]]:
     return out
 
 
-def run(reference: str) -> list[tuple]:
+def run(reference: str, quick: bool) -> list[tuple]:
     from playwright.sync_api import sync_playwright
     results = {}
+    tasks = QUICK_TASKS if quick else tuple(GOALS)
+    services, alive = (QUICK_SERVICES, QUICK_ALIVE) if quick else (SERVICES, ALIVE)
     with tempfile.TemporaryDirectory() as d:
         for name in ("before", "today"):
             folder = Path(d) / name
             folder.mkdir()
             if name == "before":
-                os.environ["ASIBOT_WEB_STATIC"] = str(old_page(reference, folder))
-            s = stack(folder)
+                old = old_page(reference, folder)     # in a smoke run too: a reference gone must show
+                if quick:
+                    continue
+                os.environ["ASIBOT_WEB_STATIC"] = str(old)
+            s = stack(folder, services, alive)
             os.environ.pop("ASIBOT_WEB_STATIC", None)
             try:
                 with sync_playwright() as p:
                     browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
                     try:
                         with fresh_page(browser, s.web_url, robots=(ARM, BASE), size=(1280, 800)) as page:
-                            results[name] = flows(s, page, today=name == "today")
+                            results[name] = flows(s, page, today=name == "today", quick=quick)
                     finally:
                         browser.close()
             finally:
                 s.stop()
     rows = []
-    for task, goal in GOALS.items():
-        (n0, t0), (n1, t1) = results["before"][task], results["today"][task]
+    for task in tasks:
+        goal = GOALS[task]
+        (n0, t0), (n1, t1) = results.get("before", {}).get(task, ("-", "-")), results["today"][task]
         rows.append((f"{task}: presses", "presses", n1, f"page at {reference}", n0, f"goal {goal}: {'met' if n1 <= goal else 'NOT met'}"))
         rows.append((f"{task}: time", "s", t1, f"page at {reference}", t0, ""))
     return rows
@@ -194,9 +211,10 @@ def run(reference: str) -> list[tuple]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--reference", default=REFERENCE, help="the commit whose page is the reference")
+    parser.add_argument("--quick", action="store_true", help=QUICK_HELP)
     args = parser.parse_args()
     print("One switch (Space: tap = next, hold = select), chromium at 1280 x 800\n")
-    print_table(run(args.reference), ("what", "unit", "today", "reference", "reference value", "goal"))
+    print_table(run(args.reference, args.quick), ("what", "unit", "today", "reference", "reference value", "goal"))
 
 
 if __name__ == "__main__":

@@ -14,7 +14,7 @@ quiet that ends it is published and stops when the launch request (or the latche
 "stop") arrives. Beside it: recognising the same utterances alone, and the VAD's hangover
 (the quiet a speaker must leave before an utterance ends, which comes on top).
 
-Run: `.venv/bin/python bench/bench_voice.py`
+Run: `.venv/bin/python bench/bench_voice.py [--quick]`
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ from asibot.voice.recognizer import Listener, Recognizer
 from asibot.voice.speaker import Speaker
 from asibot.voice.vad import Vad, VadConfig
 
-from table import print_table, times  # bench/table.py: run as `python bench/<name>.py`
+from table import QUICK_HELP, print_table, times  # bench/table.py: run as `python bench/<name>.py`
 
 ASSIGNED = ["give me the red can", "open the fridge", "go to the desk", "drink"]
 IN_GRAMMAR = ASSIGNED + ["stop", "yes", "no"]
@@ -52,6 +52,12 @@ OUT_OF_GRAMMAR = ["what is the weather like today", "turn on the television plea
 VOICES = ["en-us", "en-us+m1", "en-us+f3", "en-us+m3", "en"]
 SPEEDS = [120, 150, 180]
 ROWS: list[tuple[str, str, str, str, str]] = []
+QUICK = False
+
+
+def reps(n: int) -> int:
+    """`n` timed calls, or two in a smoke run (--quick)."""
+    return 2 if QUICK else n
 
 
 def row(what: str, t: np.ndarray, unit: str = "ms", ref: str = "", scale: float = 1e3) -> None:
@@ -65,6 +71,12 @@ def speak(folder: Path, text: str, voice: str, speed: int) -> np.ndarray:
 
 
 def main() -> None:
+    global QUICK, VOICES, SPEEDS, OUT_OF_GRAMMAR
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help=QUICK_HELP)
+    QUICK = ap.parse_args().quick
+    if QUICK:
+        VOICES, SPEEDS, OUT_OF_GRAMMAR = VOICES[:1], SPEEDS[1:2], OUT_OF_GRAMMAR[:2]
     if shutil.which("espeak-ng") is None:
         raise SystemExit("bench_voice needs espeak-ng: sudo apt-get install espeak-ng")
     folder = Path(tempfile.mkdtemp())
@@ -98,7 +110,7 @@ def main() -> None:
     big = Recognizer(build_grammar([f"{a} the {b} {c}" for a in ("give me", "bring me", "open", "close")
                                     for b in ("red", "blue", "green", "small", "big")
                                     for c in ("can", "cup", "box", "door", "bottle")]))
-    row("recognise one utterance, 103 phrases", times(lambda: big.decode(corpus[1][4]), 30))
+    row("recognise one utterance, 103 phrases", times(lambda: big.decode(corpus[1][4]), reps(30)))
 
     # audio in: one second of browser audio (48 kHz stereo float32) to 16 kHz
     rng = np.random.default_rng(0)
@@ -106,28 +118,28 @@ def main() -> None:
     fmt = AudioFormat(48000, "float32", 2)
     conv = Converter(fmt)
     chunks = [second[i:i + 960] for i in range(0, 48000, 960)]          # 20 ms chunks
-    row("1 s of 48 kHz stereo float32 -> 16 kHz, in 20 ms chunks", times(lambda: [conv.convert(c) for c in chunks], 30),
+    row("1 s of 48 kHz stereo float32 -> 16 kHz, in 20 ms chunks", times(lambda: [conv.convert(c) for c in chunks], reps(30)),
         "ms per s")
-    row("  same, one 1 s chunk", times(lambda: conv.convert(second), 30), "ms per s")
+    row("  same, one 1 s chunk", times(lambda: conv.convert(second), reps(30)), "ms per s")
     mono = second.mean(axis=1)
     row("  reference: numpy FFT resample of the 1 s (whole buffer)",
-        times(lambda: np.fft.irfft(np.fft.rfft(mono)[:8001], 16000), 30), "ms per s")
-    row("  reference: float32 stereo -> mono check only", times(lambda: decode(second, fmt), 30), "ms per s")
+        times(lambda: np.fft.irfft(np.fft.rfft(mono)[:8001], 16000), reps(30)), "ms per s")
+    row("  reference: float32 stereo -> mono check only", times(lambda: decode(second, fmt), reps(30)), "ms per s")
     conv44 = Converter(AudioFormat(44100, "float32", 2))
     second44 = second[:44100]
-    row("1 s of 44.1 kHz stereo float32 -> 16 kHz (160/441 polyphase)", times(lambda: conv44.convert(second44), 30),
+    row("1 s of 44.1 kHz stereo float32 -> 16 kHz (160/441 polyphase)", times(lambda: conv44.convert(second44), reps(30)),
         "ms per s")
 
     # VAD and the whole listener on a quiet stream (the common case: nobody speaks)
     quiet = (rng.standard_normal(16000) * 30).astype(np.int16)
     vad = Vad()
     row("VAD, 1 s of 16 kHz audio in 20 ms chunks", times(lambda: [vad.feed(quiet[i:i + 320])
-                                                               for i in range(0, 16000, 320)], 30), "ms per s")
+                                                               for i in range(0, 16000, 320)], reps(30)), "ms per s")
     listener = Listener(recognizer, fmt)
     quiet48 = (rng.standard_normal((48000, 2)) * 0.001).astype(np.float32)
     chunks48 = [quiet48[i:i + 960] for i in range(0, 48000, 960)]
     row("Listener (resample + VAD), 1 s of quiet 48 kHz stereo in 20 ms chunks",
-        times(lambda: [listener.feed(c) for c in chunks48], 30), "ms per s", "budget 1000 (real time)")
+        times(lambda: [listener.feed(c) for c in chunks48], reps(30)), "ms per s", "budget 1000 (real time)")
 
     # grammar changes
     lex = Lexicon()
@@ -141,10 +153,10 @@ def main() -> None:
 
     speaker = Speaker()
     row("speaker: synthesize 'Sorry, I did not understand.'",
-        times(lambda: speaker.synthesize("Sorry, I did not understand."), 10))
+        times(lambda: speaker.synthesize("Sorry, I did not understand."), reps(10)))
     mute = Speaker(player=[sys.executable, "-c", "import sys; sys.stdin.buffer.read()"])
     row("speaker: say() returns (speech goes on in the background)",
-        times(lambda: mute.say("I will give you the red can."), 10))
+        times(lambda: mute.say("I will give you the red can."), reps(10)))
     mute.wait(10)
 
     print(f"voice benchmark: {len(corpus)} espeak-ng utterances ({len(VOICES)} voices x {len(SPEEDS)} speeds), "
@@ -220,8 +232,8 @@ def service_rows(clips: list[tuple[str, np.ndarray]]) -> None:
 def _rebuild_times(recognizer: Recognizer, words: list[str], lex: Lexicon) -> np.ndarray:
     # alternate two word lists, so that every call compiles (an unchanged grammar is skipped)
     lists = [words, words[:-1]]
-    t = np.empty(20)
-    for i in range(20):
+    t = np.empty(reps(20))
+    for i in range(len(t)):
         start = time.perf_counter()
         recognizer.set_grammar(build_grammar(lists[i % 2], lex))
         t[i] = time.perf_counter() - start

@@ -35,7 +35,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
 
-from table import print_table  # noqa: E402
+from table import QUICK_HELP, print_table  # noqa: E402
 
 from asibot import keys  # noqa: E402
 from asibot.client import CartesianClient  # noqa: E402
@@ -62,8 +62,9 @@ def served(url: str) -> bool:
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--quick", action="store_true", help="fewer samples")
-    n_jogs = 5 if ap.parse_args().quick else 20
+    ap.add_argument("--quick", action="store_true", help=QUICK_HELP)
+    quick = ap.parse_args().quick
+    n_jogs, move_s, hops = (1, 0.5, 5) if quick else (20, 3.0, 50)
     from playwright.sync_api import sync_playwright
 
     rows = []
@@ -80,7 +81,9 @@ def main() -> None:
             wait_until(lambda: served(stack.web_url), timeout=60, interval=0.05)
             page = browser.new_page(viewport={"width": 1366, "height": 900})
             sizes: dict[str, int] = {}
-            page.on("response", lambda r: sizes.__setitem__(r.url, len(r.body()) if r.ok else 0))
+            def weigh(response) -> None:
+                sizes[response.url] = len(response.body()) if response.ok else 0
+            page.on("response", weigh)
             load_start = time.monotonic()
             page.goto(stack.web_url + "#joint")
             page.wait_for_selector("body[data-ready=true]")
@@ -91,13 +94,16 @@ def main() -> None:
             page.wait_for_timeout(500)
             total = sum(sizes.values())
             vendor = sum(v for k, v in sizes.items() if "/static/vendor/" in k)
+            # The first load only: a body asked for after a later reload of the page is gone.
+            page.remove_listener("response", weigh)
             rows.append(("page weight", "KiB", total / 1024, "of which npm packages", vendor / 1024, ""))
             rows.append(("page load to usable (cached server, fresh browser)", "s", t_load, "", "", ""))
 
             # --- arm state to the page ---------------------------------------------------------
             page.evaluate("""() => {
                 window.__seen = [];
-                const ws = new WebSocket(`ws://${location.host}/ws`);
+                const session = document.querySelector('meta[name=asibot-session]').content;
+                const ws = new WebSocket(`ws://${location.host}/ws?session=${session}`);
                 ws.onmessage = (e) => { const m = JSON.parse(e.data);
                   if (m.type === 'robot' && m.robot.id === 'asibot-sim' && m.robot.joints)
                     window.__seen.push([performance.timeOrigin + performance.now(), m.robot.joints.deg]); };
@@ -106,9 +112,9 @@ def main() -> None:
             bus = stack.bus
             sub = bus.subscribe(keys.arm_state(ROBOT), ArmState,
                                 lambda m: published.append((time.time() * 1000, [round(float(np.degrees(v)), 3) for v in m.positions])))
-            client.movj(joints=[40, 20, 30, 20, 30], duration=3.0)
+            client.movj(joints=[40, 20, 30, 20, 30], duration=move_s)
             client.wait(timeout=20)
-            client.movj(joints=[0, 10, 20, 10, 0], duration=3.0)
+            client.movj(joints=[0, 10, 20, 10, 0], duration=move_s)
             client.wait(timeout=20)
             sub.close()
             seen = page.evaluate("window.__seen")
@@ -122,7 +128,7 @@ def main() -> None:
             # The reference: the same states to a subscriber in this process (driver -> bus).
             # The subscriber above stamped arrival; the driver's own send time is not on the wire,
             # so measure the bus hop as half an RPC round trip to the sim.
-            for _ in range(50):
+            for _ in range(hops):
                 s = time.perf_counter()
                 bus.call(keys.driver_rpc(ROBOT, "object_pose"), {"name": "red_can"})
                 to_bus.append((time.perf_counter() - s) * 1000 / 2)

@@ -7,6 +7,9 @@ from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
+#: The help of the one smoke-run flag every bench has; tests/bench runs each bench with it.
+QUICK_HELP = "smoke run (CI): tiny sizes, few samples; it checks that the bench runs, its figures mean nothing"
+
 
 def print_table(rows: Iterable[Sequence[object]],
                 header: Sequence[str] = ("what", "value", "unit", "budget")) -> None:

@@ -266,6 +266,70 @@ def test_every_opened_row_ends_with_back_and_the_tab_row_starts_after_the_shown_
     assert page.evaluate("location.hash") == "#cartesian", "Back changed nothing"
 
 
+def test_a_page_chosen_by_mistake_is_undone_in_two_presses_with_the_ring_where_it_was(page):
+    with_settings(page, "cartesian", enabled=True)
+    tabs = page.evaluate("[...document.querySelectorAll('#tabs [role=tab]')].map((t) => t.innerText)")
+    tap(page)
+    tap_until(page, lambda r: "Cartesian" in r and set(r) <= set(tabs))
+    hold(page)
+    wrong = ringed(page)                                              # the tab after Cartesian ...
+    hold(page)                                                        # ... chosen by mistake
+    page.wait_for_function("h => location.hash !== h", arg="#cartesian")
+    tap(page)                                                         # past the stop: the way back
+    assert switch.ring_kind(page) == "undo" and switch.ring_label(page) == "Undo: back to Cartesian"
+    hold(page)
+    page.wait_for_function("() => location.hash === '#cartesian'")
+    page.wait_for_selector(READY["cartesian"])
+    assert ringed(page) == wrong and switch.ring_kind(page) == "control", "the ring is where the mistake was"
+    tap(page)                                                         # on to the neighbour that was meant
+    assert ringed(page) != wrong and set(ringed(page)) <= set(tabs)
+    # Undone, it is gone: out of the row by its Back, round to the stop, and the page follows it.
+    for _ in range(len(tabs) + 1):
+        if switch.ring_kind(page) == "back":
+            break
+        tap(page)
+    hold(page)
+    for _ in range(60):
+        tap(page)
+        if page.evaluate("document.getElementById('estop').hasAttribute('data-scanned')"):
+            break
+    tap(page)
+    assert switch.ring_kind(page) != "undo", switch.ring_label(page)
+
+
+COVERED = """() => {
+    const chip = document.querySelector('.scan-chip').getBoundingClientRect();
+    const ringed = [...document.querySelectorAll('[data-scanned]')];
+    const matters = '[role=status]:not([hidden]), [aria-live]:not([hidden]), .robot-card .name, .lamp, .map-place';
+    return [...document.querySelectorAll(matters)]
+      .filter((n) => n.textContent.trim() && !ringed.some((i) => i === n || i.contains(n) || n.contains(i)))
+      .filter((n) => { const r = n.getBoundingClientRect();
+        return r.width && r.height && r.left < chip.right && r.right > chip.left && r.top < chip.bottom && r.bottom > chip.top; })
+      .map((n) => (n.innerText || n.className).trim().slice(0, 40));
+}"""
+
+
+@pytest.mark.parametrize("view", ["home", "cartesian"])
+def test_the_rings_label_covers_no_robot_name_lamp_or_status(page, kitchen, task, view):
+    """The label goes to whichever corner of the ring covers none of the page's news."""
+    http(kitchen, "POST", "api/estop")                                 # the STOPPED lamps and Release all shown
+    try:
+        with_settings(page, view, enabled=True)
+        tap(page)
+        seen, covers = set(), {}
+        while True:
+            label = switch.ring_label(page)
+            if label in seen:
+                break
+            seen.add(label)
+            if hidden := page.evaluate(COVERED):
+                covers[label] = hidden
+            tap(page)
+        assert len(seen) > 5 and not covers, covers
+    finally:
+        http(kitchen, "POST", "api/release")
+
+
 def test_a_long_hold_stops_every_robot_when_the_person_chose_it(page, kitchen, released):
     with_settings(page, "joint", enabled=True, holdStopMs=1500)
     tap(page)
@@ -350,6 +414,32 @@ def test_hold_to_move_is_select_to_start_select_to_stop_while_scanning(page, arm
     still_since, q1 = time.monotonic(), arm.joints()
     wait_until(lambda: arm.samples[-1][0] > still_since + 0.5, timeout=5)   # half a second more of states
     assert arm.joints() == pytest.approx(q1, abs=1e-4), "the arm kept moving"
+
+
+def test_hold_to_move_by_dwell_starts_on_a_rest_and_the_next_rest_stops_it(page, arm):
+    """Eye-gaze or a head pointer: the same select-to-start, select-to-stop as a switch."""
+    with_settings(page, "joint", dwellMs=1000)
+    mode = page.get_by_role("button", name="Hold to move")
+    mode.focus()
+    page.keyboard.press("Enter")                                       # by keys: the pointer stays away
+    q0 = arm.joints()
+    name = f"Joint 1 {'minus' if q0[0] > 0 else 'plus'}"
+
+    def rest_on(button: str) -> None:
+        box = page.get_by_role("button", name=button).bounding_box()
+        page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+
+    rest_on(name)
+    wait_until(lambda: abs(arm.joints()[0] - q0[0]) > math.radians(2.0), timeout=10, message="resting started nothing")
+    assert page.get_by_role("button", name=name).get_attribute("class") == "active"
+    q1 = arm.joints()[1]
+    rested = time.monotonic()
+    rest_on(f"Joint 2 {'minus' if q1 > 0 else 'plus'}")               # the next rest, on another control ...
+    arm.stopped_at(rested, timeout=10)                                 # ... stops the motion
+    page.wait_for_function("() => !document.querySelector('.jog-grid button.active')")
+    page.wait_for_timeout(1500)                                        # longer than a dwell: it chose nothing else
+    assert arm.joints()[1] == pytest.approx(q1, abs=1e-4), "the second rest moved joint 2"
+    page.mouse.move(5, 5)
 
 
 # --- settings: kept, exported, imported, refused -------------------------------------------------

@@ -46,6 +46,28 @@ def test_the_page_and_its_packages_are_served_locally(api):
     assert "http://" not in html and "https://" not in html  # nothing from another server
 
 
+def test_the_api_page_works_offline_from_our_own_files(api):
+    html = api.get("/docs").text
+    assert "/static/vendor/swagger/swagger-ui-bundle.js" in html and "/openapi.json" in html
+    assert "cdn." not in html                                   # FastAPI's default page would need the internet
+    for path in ("/static/vendor/swagger/swagger-ui-bundle.js", "/static/vendor/swagger/swagger-ui.css"):
+        assert api.get(path).status_code == 200, path
+    assert api.get("/redoc").status_code == 404                 # one API page, the one that works offline
+
+
+def test_the_pages_files_are_asked_again_after_an_upgrade_and_go_out_compressed(api):
+    first = api.get("/static/js/main.js", headers={"Accept-Encoding": "gzip"})
+    assert first.headers["cache-control"] == "no-cache" and first.headers["etag"]
+    assert first.headers["content-encoding"] == "gzip"
+    again = api.get("/static/js/main.js", headers={"If-None-Match": first.headers["etag"]})
+    assert again.status_code == 304                             # unchanged: nothing sent again
+    assert api.get("/openapi.json", headers={"Accept-Encoding": "gzip"}).headers["content-encoding"] == "gzip"
+    plain = api.get("/static/js/main.js", headers={"Accept-Encoding": "identity"})
+    assert "content-encoding" not in plain.headers and plain.text.startswith("//")
+    # the API's answers are not held back by a compressor (a camera's stream goes out frame by frame)
+    assert "content-encoding" not in api.get("/api/robots", headers={"Accept-Encoding": "gzip"}).headers
+
+
 def test_robots_come_from_the_bus_with_their_state(web, api):
     views = api.get("/api/robots").json()
     me = next(v for v in views if v["id"] == ROBOT)

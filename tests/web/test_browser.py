@@ -376,3 +376,16 @@ def test_every_tab_shows_its_whole_name_and_the_open_one_is_in_view(browser, kit
         screenshot(page, f"tabs-{width}")
     finally:
         page.close()
+
+
+def test_the_api_page_draws_the_api_with_no_internet(page, kitchen):
+    """/docs in the browser: Swagger UI from the stack's own files (this browser has no internet)."""
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(kitchen.web_url + "docs")
+    title = page.locator(".swagger-ui .info .title")
+    title.wait_for(timeout=20000)
+    assert "ASIBOT Task Creator" in title.inner_text()
+    page.locator(".opblock-summary-path", has_text="/api/robots/{robot}/step").first.wait_for(timeout=10000)
+    screenshot(page, "api-docs")
+    assert not errors, errors

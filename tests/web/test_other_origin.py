@@ -51,7 +51,7 @@ async function attack(target, routes, body) {
   for (const path of ['/', '/api/robots', '/api/programs', '/api/export.zip', '/api/client-reference',
                       '/api/robots/asibot-sim/depth-cameras', '/api/robots/asibot-sim/cameras/kitchen/cloud',
                       '/api/robots/asibot-sim/cameras/kitchen/calibration',
-                      '/api/programs/evil/steps', '/api/favourites']) {
+                      '/api/programs/evil/steps', '/api/favourites', '/docs', '/openapi.json']) {
     try { reads[path] = await (await fetch(target + path)).text(); } catch (e) { reads[path] = null; }
   }
   const socket = await new Promise((done) => {

@@ -68,7 +68,12 @@ def test_the_base_page_drives_the_pioneer_and_sends_it_where_the_map_is_tapped(b
         # one step forward (width 3: 1 m), by a big button
         start = truth.last()
         page.get_by_role("button", name="Forward", exact=True).click()
+        # a motion a press started shows that it runs, beside the button, until it ends
+        page.locator(".drive.running[data-drive=forward]").wait_for(timeout=10000)
+        assert page.locator(".moving").inner_text().startswith("Moving: forward")
         page.locator(".events li", has_text="Forward: done").wait_for(timeout=30000)
+        page.locator(".drive.running").wait_for(state="detached", timeout=10000)
+        assert page.locator(".moving").inner_text() == "Not moving."
         end = truth.last()
         assert abs(math.hypot(end.x - start.x, end.y - start.y) - 1.0) < 0.05
 

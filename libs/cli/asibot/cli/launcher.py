@@ -4,6 +4,8 @@ The same file drives `docker compose up`; here each service's command runs as a 
 process with the compose environment, except that the router endpoint is rewritten to
 loopback. Output lines are prefixed with the service name; crashed services restart per
 their `restart:` policy with exponential backoff; Ctrl-C stops everything, router last.
+While the router runs, the launcher is on the bus too (`BusReport`): `asibot status` lists it,
+and its Health says how often each service was restarted (`asibot status --json`).
 """
 
 from __future__ import annotations
@@ -19,10 +21,16 @@ import time
 from pathlib import Path
 from typing import IO, Callable
 
+from asibot import keys, messages
 from asibot.access import ACCESS_ENV, ROLE_ENV
+from asibot.bus import Bus
 from asibot.cli.compose import ServiceSpec
+from asibot.errors import AsibotError
+from asibot.runtime import HEALTH_PERIOD
 
 ROUTER_SERVICE = "router"
+#: The launcher's service name and instance on the bus (one `asibot up` per router).
+LAUNCHER, LAUNCHER_INSTANCE = "launcher", "main"
 BACKOFF_START = 0.5
 BACKOFF_MAX = 10.0
 HEALTHY_AFTER = 10.0   # a run this long resets the backoff
@@ -197,8 +205,10 @@ class Supervisor:
         """SIGTERM everyone (services, then the router), SIGKILL whoever outlives the grace."""
         self._stopping.set()
         ordered = sorted(self.children, key=lambda c: c.spec.name == ROUTER_SERVICE)
-        for group in ([c for c in ordered if c.spec.name != ROUTER_SERVICE],
-                      [c for c in ordered if c.spec.name == ROUTER_SERVICE]):
+        routers = [c for c in ordered if c.spec.name == ROUTER_SERVICE]
+        for group in ([c for c in ordered if c.spec.name != ROUTER_SERVICE], routers):
+            if group is routers and routers:
+                self._event(ROUTER_SERVICE, "stopping")   # this process's own session lets go first
             for child in group:
                 if child.proc and child.proc.poll() is None:
                     try:
@@ -221,3 +231,52 @@ class Supervisor:
 
     def pids(self) -> dict[str, int]:
         return {c.spec.name: c.proc.pid for c in self.children if c.proc and c.proc.poll() is None}
+
+    def report(self) -> list[dict]:
+        """Each service: its compose name, pid while it runs, restarts so far, whether it runs.
+        Called from another thread than `poll`: it reads, and reaps nothing."""
+        out = []
+        for c in self.children:
+            proc = c.proc   # once: poll() may set it to None meanwhile
+            running = proc is not None and proc.returncode is None
+            out.append({"name": c.spec.name, "pid": proc.pid if proc is not None and running else None,
+                        "restarts": c.restarts, "running": running})
+        return out
+
+
+class BusReport:
+    """The launcher on the bus while the router runs: a liveliness token, so `asibot status`
+    lists it, and a Health every HEALTH_PERIOD whose details carry `Supervisor.report()`, so
+    `asibot status --json` gives each service's restart count (the same keys and message as
+    every service's health: nothing new in the contract). Close it before the router stops."""
+
+    def __init__(self, sup: Supervisor, endpoint: str) -> None:
+        self._sup, self._endpoint = sup, endpoint
+        self._started = time.monotonic()
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="launcher-report", daemon=True)
+        self._thread.start()
+
+    def _health(self) -> messages.Health:
+        return messages.Health(service=LAUNCHER, instance=LAUNCHER_INSTANCE, pid=os.getpid(),
+                               uptime=time.monotonic() - self._started,
+                               details={"services": self._sup.report()})
+
+    def _run(self) -> None:
+        try:
+            bus = Bus(LAUNCHER, self._endpoint, wait=10.0, stop=self._done)
+        except (AsibotError, ValueError) as exc:   # the restart counts are a convenience: say, go on
+            if not self._done.is_set():
+                self._sup.say("asibot", f"`asibot status` will not show restart counts: {exc}")
+            return
+        with bus:
+            bus.announce(keys.service(LAUNCHER, LAUNCHER_INSTANCE))
+            health = bus.publisher(keys.health(LAUNCHER, LAUNCHER_INSTANCE), messages.Health)
+            while True:
+                health.put(self._health())
+                if self._done.wait(HEALTH_PERIOD):
+                    break
+
+    def close(self) -> None:
+        self._done.set()
+        self._thread.join(5.0)

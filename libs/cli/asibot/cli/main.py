@@ -4,14 +4,17 @@ from __future__ import annotations
 
 import argparse
 import functools
+import importlib.metadata
+import json
 import logging
 import os
+import re
 import signal
 import sys
 import threading
 import time
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 from asibot import access, keys
 from asibot.safety import estop
@@ -20,19 +23,60 @@ from asibot.bus import DEFAULT_ROUTER, ROUTER_ENV, Bus, open_router, router_endp
 from asibot.client import DriverClient, SimClient
 from asibot.errors import AsibotError
 from asibot.messages import Health
+from asibot.runtime import HEALTH_PERIOD
 from asibot.safety.estop import who
 from asibot.safety.identity import Identity
 
 #: How long a driver may take to clear a fault or to reset its world, s (drives re-initialise).
 RESET_TIMEOUT = 10.0
+#: The distribution that installs the `asibot` command (libs/cli/pyproject.toml): its version.
+DISTRIBUTION = "asibot-cli"
+#: How a command ended by Ctrl-C exits: the shell's 128 + SIGINT, whatever the command.
+INTERRUPTED = 128 + signal.SIGINT
+#: Moves the recordings folder for `asibot up` (compose.yaml gives it to the recorder) and
+#: `asibot recordings` alike.
+RECORDINGS_ENV = "ASIBOT_RECORDINGS"
+
+_NUMBER = r"\s*[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?\s*"
+#: A number or a comma-separated list of them ("-90", "-1,2.5,0", "-1e-3"): a value, never an option.
+NUMBERS = re.compile(rf"^{_NUMBER}(?:,{_NUMBER})*$")
 
 
-def _stop_on_signals() -> threading.Event:
-    stop = threading.Event()
+class Parser(argparse.ArgumentParser):
+    """argparse reading every token that looks like a number or a list of numbers as a value:
+    coordinates and angles are often negative ("nav goto -1,2,0"), and no option of ours looks
+    like a number. argparse already does this for "-90", not for "-1,2,0" or "-1e3"; its own
+    test is this one pattern, so widening it keeps every other rule (subparsers inherit it)."""
 
-    def handler(signum, frame):
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NUMBERS
+
+
+def _version() -> str:
+    try:
+        return importlib.metadata.version(DISTRIBUTION)
+    except importlib.metadata.PackageNotFoundError:  # run from a source tree never installed
+        return "unknown (not installed)"
+
+
+class Stop(threading.Event):
+    """Set on SIGINT or SIGTERM, remembering which: Ctrl-C exits 130 as the shell expects, while
+    a SIGTERM is how a supervisor (`asibot up`, Docker) ends a service that did nothing wrong."""
+
+    signum: int | None = None
+
+    def exit_code(self) -> int:
+        return INTERRUPTED if self.signum == signal.SIGINT else 0
+
+
+def _stop_on_signals() -> Stop:
+    stop = Stop()
+
+    def handler(signum: int, frame: object) -> None:
         if stop.is_set():
-            os._exit(130)
+            os._exit(INTERRUPTED)   # a second Ctrl-C: the user means it
+        stop.signum = signum
         stop.set()
 
     signal.signal(signal.SIGINT, handler)
@@ -40,19 +84,36 @@ def _stop_on_signals() -> threading.Event:
     return stop
 
 
-def _compose_path(explicit: str | None) -> Path:
-    if explicit:
-        return Path(explicit)
+def _find_compose() -> Path | None:
+    """$ASIBOT_COMPOSE, else the checkout's compose.yaml, found from wherever in it the command
+    runs (as git finds .git); None outside any checkout."""
     env = os.environ.get("ASIBOT_COMPOSE")
     if env:
         return Path(env)
-    # The checkout's compose.yaml, found from wherever in it the command runs (as git finds .git).
     here = Path.cwd().resolve()
     for folder in (here, *here.parents):
         if (folder / "compose.yaml").is_file():
             return folder / "compose.yaml"
-    raise SystemExit("asibot up: no compose.yaml here or in a parent folder: run it in the "
-                     "repository's checkout, or name the file with --file or ASIBOT_COMPOSE")
+    return None
+
+
+def _compose_path(explicit: str | None) -> Path:
+    found = Path(explicit) if explicit else _find_compose()
+    if found is None:
+        raise SystemExit("asibot up: no compose.yaml here or in a parent folder: run it in the "
+                         "repository's checkout, or name the file with --file or ASIBOT_COMPOSE")
+    return found
+
+
+def recordings_folder(root: Path | None = None) -> Path:
+    """The one recordings folder of every command: $ASIBOT_RECORDINGS, else `recordings` in the
+    checkout `root` (the folder of compose.yaml, whose recorder runs there with `--dir
+    recordings`). Without `root`: the checkout `asibot up` would use from here, else this folder
+    (recordings copied out of a checkout)."""
+    if root is None:
+        compose = _find_compose()
+        root = compose.resolve().parent if compose else Path.cwd()
+    return root / os.environ.get(RECORDINGS_ENV, "recordings")   # an absolute path replaces root
 
 
 # ---------------------------------------------------------------- router
@@ -68,13 +129,22 @@ def cmd_router(args: argparse.Namespace) -> int:
     stop.wait()
     token.undeclare()
     session.close()
-    return 0
+    return stop.exit_code()
 
 
 # ---------------------------------------------------------------- up
+def _use_access(credentials: Path | None) -> None:
+    """This process's own session (the launcher's report on the bus) logs in as its services
+    do: with the logins `up` uses, and with none on an open router, which refuses any."""
+    if credentials is None:
+        os.environ.pop(access.ACCESS_ENV, None)
+    else:
+        os.environ[access.ACCESS_ENV] = str(credentials)
+
+
 def cmd_up(args: argparse.Namespace) -> int:
     from asibot.cli import compose
-    from asibot.cli.launcher import Supervisor, wait_for_port
+    from asibot.cli.launcher import ROUTER_SERVICE, BusReport, Supervisor, wait_for_port
 
     path = _compose_path(args.file)
     services = compose.select(compose.load(path), args.profile, args.only)
@@ -92,6 +162,7 @@ def cmd_up(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 2
     credentials = access.ensure_credentials() if secure else None
+    _use_access(credentials)
     listen = f"{endpoint},tls/{args.tls}" if args.tls else None
     stop = _stop_on_signals()
     sup = Supervisor(services, endpoint, root=path.resolve().parent, access=credentials, listen=listen)
@@ -100,11 +171,13 @@ def cmd_up(args: argparse.Namespace) -> int:
     if credentials:
         sup.say("asibot", f"access control on: logins in {credentials} (`{access.ACCESS_ENV}={credentials} "
                           "asibot estop` from another shell); anonymous:anonymous may only read")
-    recordings = path.resolve().parent / os.environ.get("ASIBOT_RECORDINGS", "recordings")  # as compose.yaml
+    recordings = recordings_folder(path.resolve().parent)
     if args.tls:
         sup.say("asibot", f"other machines: ASIBOT_ROUTER=tls/<this machine>:{args.tls.rsplit(':', 1)[-1]}, "
                           f"with {credentials}/ca.pem and their role's .credentials in their {access.ACCESS_ENV}")
     sup.say("asibot", f"router {endpoint}; recordings in {recordings}; Ctrl-C stops")
+
+    report: list[BusReport] = []
 
     def on_event(name: str, what: str) -> None:
         url = next(s for s in services if s.name == name).url
@@ -114,14 +187,67 @@ def cmd_up(args: argparse.Namespace) -> int:
                 if wait_for_port(f"tcp/127.0.0.1:{port}", 30.0):
                     sup.say("asibot", f"web: {url}")
             threading.Thread(target=announce, daemon=True).start()
+        # The restart counts go on the bus while the router is there to carry them.
+        if name == ROUTER_SERVICE and what == "ready":
+            report.append(BusReport(sup, endpoint))
+        if name == ROUTER_SERVICE and what == "stopping":
+            for r in report:
+                r.close()
 
     sup.on_event = on_event
     sup.run(stop)
     sup.say("asibot", "stopped")
-    return 0
+    return stop.exit_code()
 
 
 # ---------------------------------------------------------------- status
+def _health_reports(bus: Bus) -> dict[str, Health]:
+    """One Health of each live service (and of `asibot up`, with its restart counts), by key."""
+    health: dict[str, Health] = {}
+    bus.subscribe(keys.ALL_HEALTH, Health, lambda k, h: health.__setitem__(k, h), with_key=True)
+    time.sleep(HEALTH_PERIOD + 0.2)   # every service reports once a period
+    return health
+
+
+def _launched(health: dict[str, Health]) -> list[dict]:
+    """What `asibot up` says of the services it runs (name, pid, restarts, running); [] when
+    no `asibot up` runs them (compose, or started by hand)."""
+    from asibot.cli.launcher import LAUNCHER, LAUNCHER_INSTANCE
+
+    report = health.get(keys.health(LAUNCHER, LAUNCHER_INSTANCE))
+    services = report.details.get("services") if report else None
+    return [s for s in services if isinstance(s, dict)] if isinstance(services, list) else []
+
+
+def _status_rows(alive: list[str], health: dict[str, Health]) -> list[dict]:
+    """Each live service, with its health when it reported, and its restart count when the
+    `asibot up` running it said (a service and the process up started are told apart by pid)."""
+    by_pid = {s.get("pid"): s for s in _launched(health) if s.get("pid")}
+    rows = []
+    for key in alive:
+        service, instance = keys.parse_service(key)
+        h = health.get(keys.health(service, instance))
+        launched = by_pid.get(h.pid) if h else None
+        rows.append({"service": service, "instance": instance,
+                     "pid": h.pid if h else None, "uptime": h.uptime if h else None,
+                     "rejected": h.rejected if h else None,
+                     "launched_as": launched.get("name") if launched else None,
+                     "restarts": launched.get("restarts") if launched else None})
+    return rows
+
+
+def _print_status(rows: list[dict]) -> None:
+    w = max(len(r["service"]) for r in rows)
+    print(f"{'SERVICE':<{w}}  INSTANCE")
+    for r in rows:
+        line = f"{r['service']:<{w}}  {r['instance']}"
+        if r["pid"] is not None:
+            line += f"  pid {r['pid']}  up {r['uptime']:.0f} s  rejected {r['rejected']}"
+        if r["restarts"] is not None:
+            line += f"  restarts {r['restarts']}"
+        print(line)
+
+
 def cmd_status(args: argparse.Namespace) -> int:
     try:
         bus = Bus("status", wait=args.wait)
@@ -129,24 +255,16 @@ def cmd_status(args: argparse.Namespace) -> int:
         print(exc, file=sys.stderr)
         return 1
     with bus:
-        health: dict[str, Health] = {}
-        if args.health:
-            bus.subscribe(keys.ALL_HEALTH, Health, lambda k, h: health.__setitem__(k, h), with_key=True)
-            time.sleep(2.2)
+        health = _health_reports(bus) if args.health or args.json else {}
         alive = bus.alive(keys.ALL_SERVICES)
-    if not alive:
+    rows = _status_rows(alive, health)
+    if args.json:
+        print(json.dumps({"router": bus.endpoint, "services": rows, "launched": _launched(health)}, indent=2))
+    elif rows:
+        _print_status(rows)
+    else:
         print(f"No services are running on {bus.endpoint}.")
-        return 1
-    rows = [keys.parse_service(k) for k in alive]
-    w = max(len(s) for s, _ in rows)
-    print(f"{'SERVICE':<{w}}  INSTANCE")
-    for service, instance in rows:
-        line = f"{service:<{w}}  {instance}"
-        h = health.get(keys.health(service, instance))
-        if h:
-            line += f"  pid {h.pid}  up {h.uptime:.0f} s  rejected {h.rejected}"
-        print(line)
-    return 0
+    return 0 if rows else 1
 
 
 # ---------------------------------------------------------------- safety
@@ -247,9 +365,10 @@ def _wait_for(condition: Callable[[], object], timeout: float) -> bool:
 def cmd_recordings(args: argparse.Namespace) -> int:
     from asibot.recorder.reader import list_recordings
 
-    found = list_recordings(args.dir)
+    folder = Path(args.dir) if args.dir else recordings_folder()
+    found = list_recordings(folder)
     if not found:
-        print(f"No recordings in {args.dir}/ yet: `asibot up` writes one per session.")
+        print(f"No recordings in {folder}/ yet: `asibot up` writes one per session.")
         return 0
     print(f"{'FILE':<40} {'DURATION':>9} {'MESSAGES':>9} {'TOPICS':>6}  NOTE")
     for s in found:
@@ -335,7 +454,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if guard.held:
         print(f"held back {guard.held} commands because a driver came alive during the replay "
               f"({', '.join(sorted(guard.drivers))})")
-    return 0
+    return stop.exit_code()
 
 
 # ---------------------------------------------------------------- export
@@ -365,7 +484,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     elif not summary.complete:
         print("the recording ends in a truncated chunk (its writer did not finish): exported up to there")
     print("open it in Foxglove or Lichtblick: File > Open local file")
-    return 0
+    return stop.exit_code() if stop is not None else 0
 
 
 def _host_port(text: str) -> str:
@@ -376,7 +495,8 @@ def _host_port(text: str) -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="asibot", description="assistive robot stack")
+    p = Parser(prog="asibot", description="assistive robot stack")
+    p.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = p.add_subparsers(dest="command", required=True)
 
     up = sub.add_parser("up", help="start the router and a profile's services as local processes")
@@ -393,6 +513,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     st = sub.add_parser("status", help="list the running services")
     st.add_argument("--health", action="store_true", help="also wait for one health report of each")
+    st.add_argument("--json", action="store_true",
+                    help="machine-readable: each service with its health and, under `asibot up`, its "
+                         "restart count (waits for one health report)")
     st.add_argument("--wait", type=float, default=2.0, help="seconds to wait for the router")
     st.set_defaults(func=cmd_status)
 
@@ -445,7 +568,8 @@ def build_parser() -> argparse.ArgumentParser:
     navcli.add_parser(sub)
 
     rc = sub.add_parser("recordings", help="list recordings with duration, topics and counts")
-    rc.add_argument("dir", nargs="?", default=os.environ.get("ASIBOT_RECORDINGS", "recordings"))
+    rc.add_argument("dir", nargs="?",
+                    help=f"default: ${RECORDINGS_ENV}, else recordings/ in the checkout `asibot up` uses")
     rc.add_argument("-v", "--verbose", action="store_true", help="per-topic counts and types")
     rc.set_defaults(func=cmd_recordings)
     return p
@@ -456,6 +580,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
+    except KeyboardInterrupt:  # Ctrl-C where a command has no handler of its own: no traceback
+        return INTERRUPTED
     except BrokenPipeError:  # `asibot recordings -v | head`: the reader has all it wanted
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0

@@ -1,20 +1,24 @@
 """`asibot nav ...`: send a mobile robot somewhere, drive it, and manage its places, from a shell.
 
     asibot nav goto fridge              # waits until it arrives (or says why not); Ctrl-C cancels
-    asibot nav goto 3.0,2.5,1.57 --no-wait
-    asibot nav drive 1.0 | turn 90 | primitive "turn left 90" | stop | cancel
+    asibot nav goto 3.0,-2.5,90 --no-wait   # x, y in m, heading in degrees
+    asibot nav drive 1.0 | turn -90 | primitive "turn left 90" | stop | cancel
     asibot nav places | save-place "sofa" | rename-place sofa couch | remove-place couch
     asibot nav status
     asibot nav map start | stop | save home [--use]   # map a new home while driving it
 
 The robot is --robot, else $ASIBOT_ROBOT, else pioneer-sim. Every refusal prints the nav
-service's sentence and exits with 2, as the other commands do.
+service's sentence and exits with 2, as the other commands do. Every angle typed or printed
+here is in degrees; poses go to nav in radians (NavClient.goto), converted at this edge only.
+Ctrl-C while the robot moves stops it (cancels the goal), then exits 130 like any Ctrl-C.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import os
+from typing import Callable, Sequence
 
 from asibot import driving
 from asibot.client import NavClient
@@ -22,21 +26,48 @@ from asibot.client import NavClient
 DEFAULT_ROBOT = "pioneer-sim"
 
 
+def _numbers(text: str) -> list[float] | None:
+    """The numbers of "x,y,theta", or None when `text` is a name (a place may be called "4b")."""
+    try:
+        return [float(v) for v in text.split(",")] if "," in text else None
+    except ValueError:
+        return None
+
+
 def _target(text: str) -> str | list[float]:
-    parts = text.split(",")
-    if len(parts) == 3:
-        try:
-            return [float(v) for v in parts]
-        except ValueError:
-            pass
-    return text
+    """A place's name, or x,y,theta as people type it (m, m, degrees) made the pose nav takes
+    (m, m, rad). A wrong list of numbers is refused here, as argparse refuses any bad value."""
+    numbers = _numbers(text)
+    if numbers is None:
+        return text
+    if len(numbers) != 3 or not all(math.isfinite(v) for v in numbers):
+        raise argparse.ArgumentTypeError(
+            f"give a place's name or x,y,theta (m, m, degrees) such as 1.5,-2,90, not {text!r}")
+    x, y, theta = numbers
+    return [x, y, math.radians(theta)]
+
+
+def _pose(pose: Sequence[float]) -> str:
+    """A pose from nav (m, m, rad) as people read it: the heading in degrees."""
+    return f"({pose[0]:.2f}, {pose[1]:.2f}, {math.degrees(pose[2]):.0f} degrees)"
 
 
 def _show(status: dict) -> str:
     pose = status.get("pose")
-    where = f" at ({pose[0]:.2f}, {pose[1]:.2f}, {pose[2]:.2f} rad)" if pose else ""
+    where = f" at {_pose(pose)}" if pose else ""
     mapping = f"\n{status['mapping']}" if status.get("mapping") else ""
     return f"{status['state']}: {status['text']}{where}{mapping}"
+
+
+def _wait_or_stop(robot: str, wait: Callable[[], dict], stop: Callable[[], object]) -> None:
+    """Wait for the motion to end; on Ctrl-C stop the robot first (a person who interrupts a
+    waiting command means the robot too), then let the interrupt end the command."""
+    try:
+        print(f"{robot}: {wait()['text']}")
+    except KeyboardInterrupt:
+        stop()
+        print(f"{robot}: stopped on Ctrl-C")
+        raise
 
 
 def cmd_nav(args: argparse.Namespace) -> int:
@@ -44,23 +75,17 @@ def cmd_nav(args: argparse.Namespace) -> int:
     with NavClient(robot) as base:
         verb = args.verb
         if verb == "goto":
-            gid = base.goto(_target(args.target))
+            gid = base.goto(args.target)
             if args.no_wait:
                 print(f"{robot}: goal {gid} started")
                 return 0
-            try:
-                result = base.wait(gid)
-            except KeyboardInterrupt:
-                base.cancel(gid)
-                print(f"{robot}: goal {gid} canceled")
-                return 1
-            print(f"{robot}: {result['text']}")
+            _wait_or_stop(robot, lambda: base.wait(gid), lambda: base.cancel(gid))
         elif verb in ("drive", "turn", "primitive"):
             call = {"drive": lambda: base.drive(args.amount), "turn": lambda: base.turn(args.amount),
                     "primitive": lambda: base.primitive(args.name)}[verb]
             print(f"{robot}: {call()}")
             if not args.no_wait:
-                print(f"{robot}: {base.wait()['text']}")
+                _wait_or_stop(robot, base.wait, base.stop)
         elif verb == "stop":
             base.stop()
             print(f"{robot}: stopped")
@@ -70,10 +95,10 @@ def cmd_nav(args: argparse.Namespace) -> int:
             print(f"{robot}: {_show(base.status())}")
         elif verb == "places":
             for name, (x, y, th) in base.places().items():
-                print(f"{name:24s} x {x:6.2f}  y {y:6.2f}  theta {th:5.2f}")
+                print(f"{name:24s} x {x:6.2f}  y {y:6.2f}  theta {math.degrees(th):4.0f} degrees")
         elif verb == "save-place":
-            x, y, th = base.save_place(args.name, replace=args.replace)
-            print(f"{robot}: saved {args.name!r} at ({x:.2f}, {y:.2f}, {th:.2f} rad)")
+            pose = base.save_place(args.name, replace=args.replace)
+            print(f"{robot}: saved {args.name!r} at {_pose(pose)}")
         elif verb == "rename-place":
             base.rename_place(args.name, args.new_name)
             print(f"{robot}: {args.name!r} is now {args.new_name!r}")
@@ -92,13 +117,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     nav = sub.add_parser("nav", help="send a mobile robot to a place, drive it, manage its places")
     nav.add_argument("--robot", help=f"the robot (default $ASIBOT_ROBOT or {DEFAULT_ROBOT})")
     verbs = nav.add_subparsers(dest="verb", required=True)
-    g = verbs.add_parser("goto", help="go to a named place or to x,y,theta (m, m, rad)")
-    g.add_argument("target")
+    g = verbs.add_parser("goto", help="go to a named place or to x,y,theta (m, m, degrees; e.g. -1,2,90)")
+    g.add_argument("target", type=_target, help="a place's name, or x,y,theta (m, m, degrees)")
     g.add_argument("--no-wait", action="store_true", help="return once the goal is accepted")
     for name, what, unit in (("drive", "drive straight", "m, negative: backwards"),
-                             ("turn", "turn in place", "deg, positive: left")):
+                             ("turn", "turn in place", "degrees, positive: left")):
         d = verbs.add_parser(name, help=f"{what} ({unit})")
-        d.add_argument("amount", type=float)
+        d.add_argument("amount", type=float, help=unit)
         d.add_argument("--no-wait", action="store_true")
     pr = verbs.add_parser("primitive", help=f"a driving primitive: {', '.join(driving.PRIMITIVES)}")
     pr.add_argument("name")

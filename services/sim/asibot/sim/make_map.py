@@ -9,7 +9,7 @@ A cell is occupied when the footprint of any static, collidable geom whose verti
 meets the band [floor + 2 cm, robot height] covers any of its 4x4 sample points. Free
 objects (cans, cups) and the robot are not part of the map. Cells off the floor are unknown.
 
-    python -m asibot.sim.make_map                  # regenerate services/sim/maps/apartment.*
+    python -m asibot.sim.make_map                  # regenerate libs/common/asibot/maps/apartment.*
     python -m asibot.sim.make_map --world kitchen --out /tmp
 """
 

@@ -19,8 +19,10 @@ from pathlib import Path
 from typing import Any
 
 from fastapi import FastAPI, WebSocket, WebSocketDisconnect
+from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
+from starlette.middleware.gzip import GZipMiddleware
 from pydantic import StrictBool
 
 from asibot.errors import RpcError
@@ -132,7 +134,8 @@ def create_app(web: Web) -> guard.PageGuard:
         finally:
             pusher.cancel()
 
-    app = FastAPI(title="ASIBOT Task Creator", lifespan=lifespan)
+    # The API's page loads Swagger UI from our own /static (FastAPI's default is a CDN: blank offline).
+    app = FastAPI(title="ASIBOT Task Creator", lifespan=lifespan, docs_url=None, redoc_url=None)
     app.state.web = web
     errors.install(app)
     app.include_router(robots_router)
@@ -198,8 +201,39 @@ def create_app(web: Web) -> guard.PageGuard:
             CHARSET, f'{CHARSET}\n  <meta name="{guard.META}" content="{web.session}">', 1)
         return HTMLResponse(page, headers={"Cache-Control": "no-store"})
 
-    app.mount("/static", StaticFiles(directory=STATIC), name="static")
-    return guard.PageGuard(BodyLimit(app), web.callers, web.session)
+    @app.get("/docs", include_in_schema=False)
+    def api_docs() -> HTMLResponse:
+        return get_swagger_ui_html(openapi_url=app.openapi_url or "/openapi.json", title=f"{app.title}: API",
+                                   swagger_js_url="/static/vendor/swagger/swagger-ui-bundle.js",
+                                   swagger_css_url="/static/vendor/swagger/swagger-ui.css",
+                                   swagger_favicon_url="/static/icons/home.svg")
+
+    app.mount("/static", Static(directory=STATIC), name="static")
+    return guard.PageGuard(BodyLimit(Compressed(app)), web.callers, web.session)
+
+
+class Static(StaticFiles):
+    """The page's files, asked again at every load (a 304 when unchanged, by their ETag): after an
+    upgrade the browser runs the new JavaScript, never a guess at how long the old one stays fresh."""
+
+    def file_response(self, *args: Any, **kwargs: Any) -> Response:
+        response = super().file_response(*args, **kwargs)
+        response.headers["Cache-Control"] = "no-cache"
+        return response
+
+
+class Compressed:
+    """gzip for the page's files and the API's schema, for browsers that take it. Only there: a
+    camera's MJPEG stream must go out frame by frame, never held in a compressor's buffer."""
+
+    PATHS = ("/static/", "/openapi.json", "/docs")
+
+    def __init__(self, app: Any) -> None:
+        self.app, self.gzip = app, GZipMiddleware(app, minimum_size=1024)
+
+    async def __call__(self, scope: dict, receive: Any, send: Any) -> None:
+        wanted = scope["type"] == "http" and scope["path"].startswith(self.PATHS)
+        await (self.gzip if wanted else self.app)(scope, receive, send)
 
 
 def stop_quietly(motion: Motion, robot: str, after: str) -> None:

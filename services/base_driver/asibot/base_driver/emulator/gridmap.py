@@ -79,7 +79,7 @@ def room(width: float = 8.0, depth: float = 6.0, resolution: float = 0.05) -> Gr
     return GridMap(grid, resolution, (-width / 2.0, -depth / 2.0))
 
 
-#: Maps shipped with the stack, generated from the simulation's worlds (services/sim/maps).
+#: Maps shipped with the stack, generated from the simulation's worlds (libs/common/asibot/maps).
 SHIPPED_MAPS = Path(str(resources.files("asibot.maps")))
 
 

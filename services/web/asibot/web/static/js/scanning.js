@@ -8,6 +8,8 @@
 // Moves: step (the switch moves the ring) or automatic (a timer does). One switch: tap = next,
 // hold = select (AsTeRICS-Grid's scheme); in automatic scanning any press selects. Two switches:
 // next and select. After `rounds` rounds without a select, scanning stops and waits for a press.
+// Every opened row or group ends with Back; right after a select changed the page, "Undo: back
+// to <page>" follows the stop and puts the page and the ring back as they were.
 //
 // Controls that act while held (jog "Hold to move") take the 'scan:select' event: they start, and
 // the next press of any switch stops them (select-to-start, select-to-stop). When scanning is off
@@ -98,7 +100,11 @@ function groups() {
 }
 
 function firstEntries() {
-  return FIRST.map((id) => document.getElementById(id)).filter((n) => n && usable(n)).map(item);
+  const first = FIRST.map((id) => document.getElementById(id)).filter((n) => n && usable(n)).map(item);
+  // Right after a page was chosen, the way back to the one before comes next (one tap, no side
+  // effect): a select held a moment too long on the wrong tab costs two presses, not a round.
+  if (scan.undo && scan.undo.tab.isConnected) first.push({ nodes: [scan.undo.tab], label: scan.undo.label, undo: true });
+  return first;
 }
 
 function pageEntries() {
@@ -142,7 +148,7 @@ function startOf(inside) {
 
 // --- the ring ----------------------------------------------------------------------------------
 const chip = el('span', { class: 'scan-chip' });
-const ring = el('div', { id: 'scan-ring', class: 'scan-ring', 'aria-hidden': 'true', hidden: true }, chip);
+const ring = el('div', { id: 'scan-ring', class: 'scan-ring', 'aria-hidden': 'true', hidden: true, dataset: { chip: 'above-left' } }, chip);
 
 function boxOf(entry) {
   const rects = entry.box ? [entry.box.getBoundingClientRect()] : entry.nodes.map((n) => n.getBoundingClientRect());
@@ -150,6 +156,55 @@ function boxOf(entry) {
   const right = Math.max(...rects.map((r) => r.right)), bottom = Math.max(...rects.map((r) => r.bottom));
   return { left: left + window.scrollX, top: top + window.scrollY, width: right - left, height: bottom - top };
 }
+
+// What the ring's label must not cover: news and states (a robot's name, its STOPPED lamp, a
+// status line) count ten times as much as another control.
+const MATTERS = '[role=status]:not([hidden]), [aria-live]:not([hidden]), .robot-card .name, .lamp, .map-place';
+const GAP = 12;               // the label's distance from the box, as .scan-chip's CSS draws it
+
+function overlap(a, b) {
+  const w = Math.min(a.right, b.right) - Math.max(a.left, b.left);
+  const h = Math.min(a.bottom, b.bottom) - Math.max(a.top, b.top);
+  return w > 0 && h > 0 ? w * h : 0;
+}
+
+// Where the label goes round the box: above or below it (from its near or far edge), or beside
+// it. The place that covers least of what matters and stays in the window wins; ties go to the
+// first: above, on the box's near side.
+function chipPlace(b, inside) {
+  const vw = document.documentElement.clientWidth, vh = window.innerHeight;
+  const box = { left: b.left - window.scrollX, top: b.top - window.scrollY };
+  box.right = box.left + b.width;
+  box.bottom = box.top + b.height;
+  const w = chip.offsetWidth, h = chip.offsetHeight;
+  const near = box.left + b.width / 2 > vw / 2 ? 'right' : 'left';
+  const far = near === 'right' ? 'left' : 'right';
+  const at = {
+    'above-left': [box.left - GAP, box.top - GAP - h], 'above-right': [box.right + GAP - w, box.top - GAP - h],
+    'below-left': [box.left - GAP, box.bottom + GAP], 'below-right': [box.right + GAP - w, box.bottom + GAP],
+    right: [box.right + GAP, box.top], left: [box.left - GAP - w, box.top],
+  };
+  const order = [`above-${near}`, `above-${far}`, `below-${near}`, `below-${far}`, near, far];
+  const others = [];
+  for (const n of document.querySelectorAll(`${MATTERS}, ${ACTIONABLE}`)) {
+    if (inside.some((i) => i === n || i.contains(n) || n.contains(i)) || n.closest('#scan-ring')) continue;
+    const news = n.matches(MATTERS);
+    if (news && !n.textContent.trim()) continue;      // an empty status line hides nothing
+    const r = n.getBoundingClientRect();
+    if (r.width && r.height && r.bottom > 0 && r.top < vh) others.push({ r, weight: news ? 10 : 1 });
+  }
+  let best = null;
+  for (const name of order) {
+    const [left, top] = at[name];
+    const r = { left, top, right: left + w, bottom: top + h };
+    const off = (r.top < 0 || r.bottom > vh ? 1e9 : 0) + (r.left < 0 || r.right > vw ? 1e8 : 0);
+    const cost = off + others.reduce((sum, o) => sum + o.weight * overlap(r, o.r), 0);
+    if (!best || cost < best.cost) best = { cost, name };
+  }
+  return best.name;
+}
+
+let placed = '';              // the box and label the label's place was chosen for
 
 function place() {
   if (!scan.entry) return;
@@ -160,9 +215,11 @@ function place() {
   const edge = 13, right = document.documentElement.clientWidth + window.scrollX - edge;
   if (b.left < edge) { b.width -= edge - b.left; b.left = edge; }
   if (b.left + b.width > right) b.width = right - b.left;
-  ring.classList.toggle('chip-right', b.left + b.width / 2 > window.scrollX + document.documentElement.clientWidth / 2);
   Object.assign(ring.style, { left: `${b.left}px`, top: `${b.top}px`, width: `${b.width}px`, height: `${b.height}px` });
-  ring.classList.toggle('chip-below', b.top - window.scrollY < 40);
+  const key = [b.left, b.top, b.width, b.height, window.scrollX, window.scrollY, chip.textContent, chip.offsetWidth].join();
+  if (key === placed) return;    // called every frame: choose again only when something moved
+  placed = key;
+  ring.dataset.chip = chipPlace(b, scan.entry.box ? [scan.entry.box] : scan.entry.nodes);
 }
 
 function loop() {
@@ -202,6 +259,7 @@ const scan = {
   suspended: 0,     // the Access page is listening for a new switch
   steps: 0,         // moves of the ring, as data-step (a test or a person's tool can follow it)
   lastTap: null,    // { which, at }: the last tap's release, for two quick taps = stop
+  undo: null,       // { tab, label, levels }: the page shown and the ring before the last page change
 };
 
 function level() { return scan.levels[scan.levels.length - 1]; }
@@ -212,7 +270,7 @@ function mark(entry) {
   if (!entry) return;
   for (const n of entry.nodes) n.setAttribute('data-scanned', '');
   // What the ring stands on, for a test or a person's tool: a control, a row or group, or Back.
-  ring.dataset.kind = entry.back ? 'back' : entry.open ? 'group' : 'control';
+  ring.dataset.kind = entry.back ? 'back' : entry.undo ? 'undo' : entry.open ? 'group' : 'control';
   ring.dataset.label = entry.label;
   chip.textContent = scan.latched ? `${entry.label}: running. Press your switch to stop.` : entry.label;
   place();
@@ -300,6 +358,7 @@ function next() {
 function select() {
   let entry = scan.entry;
   if (entry && entry.back) { back(); return; }
+  if (entry && entry.undo) { undo(); return; }
   // Open a row or group; one that holds a single row or control opens straight into it.
   while (entry && entry.open) {
     const inside = entry.open();
@@ -336,12 +395,33 @@ function latch(stopIt) {
   };
 }
 
+// A page chosen by mistake: show the page before again and put the ring back where it was, on
+// the tab chosen, so one tap moves on to the neighbour that was meant.
+function undo() {
+  const { tab, levels } = scan.undo;
+  scan.undo = null;
+  tab.click();
+  scan.levels = levels;
+  level().steps = 0;
+  beep(990, 60);
+  show();
+}
+
+function shownTab() { return document.querySelector('#tabs [role="tab"][aria-selected="true"]'); }
+
 function activate(node) {
   beep(990, 90);
+  // A page change is the navigation a select can undo (the view follows the hash a moment later,
+  // so it is told by the tab chosen, not by the page shown after).
+  const before = shownTab();
+  const pageChange = before && node.getAttribute('role') === 'tab' && node !== before;
+  const levels = scan.levels.map((lv) => ({ ...lv }));
+  scan.undo = null;      // only the last step can be undone
   if (chooseControl(node, latch) === 'latched') {
     if (!scan.latched && scan.running) afterSelect();    // the control acted and did not latch
     return;
   }
+  if (pageChange) scan.undo = { tab: before, levels, label: `Undo: back to ${nameOf(before)}` };
   if (scan.running) afterSelect();    // the select may have turned scanning off
 }
 

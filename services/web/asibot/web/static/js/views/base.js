@@ -78,10 +78,21 @@ function drivePanel(robotId) {
       levels.textContent = r.text[0].toUpperCase() + r.text.slice(1);
     }),
   }, change[0].toUpperCase() + change.slice(1)));
+  // A press starts a motion that runs on its own: the panel says so, and rings the button that
+  // started it, until the robot stops (nav's status names the running primitive first).
+  const moving = el('p', { class: 'moving', role: 'status' });
+  const drives = state.config.base.drives.flat().map(button);
+  const showMotion = (status) => {
+    const running = status && status.driving ? status.driving.split(',')[0] : '';
+    moving.textContent = running ? `Moving: ${status.driving}. Stop ends it.` : 'Not moving.';
+    moving.classList.toggle('now', Boolean(running));
+    for (const b of drives) b.classList.toggle('running', b.dataset.drive === running);
+  };
+  showMotion(null);
   const panel = el('section', { class: 'panel', 'aria-label': 'Drive' }, el('h2', {}, 'Drive'),
-    el('div', { class: 'drives', role: 'group', 'aria-label': 'Driving primitives' }, ...state.config.base.drives.flat().map(button)),
+    el('div', { class: 'drives', role: 'group', 'aria-label': 'Driving primitives' }, ...drives), moving,
     el('div', { class: 'row' }, keepGoing, ...changes), levels);
-  return { panel, levels };
+  return { panel, levels, showMotion };
 }
 
 export default {
@@ -115,6 +126,7 @@ export default {
           map.update(r.nav);
           status.textContent = statusText(r);
           const s = r.nav && r.nav.status;
+          drive.showMotion(s);
           if (s && !drive.levels.textContent) drive.levels.textContent = `Speed ${s.speed} of 5, width ${s.width} of 5.`;
           const recent = r.events.slice(-6).reverse();
           const key = recent.map((e) => e.time).join();
