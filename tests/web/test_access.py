@@ -358,12 +358,23 @@ def test_switch_access_is_found_on_home_and_turned_on_in_one_action(page):
     assert stored(page)["enabled"] is False
 
 
-def test_the_emergency_stop_stays_on_screen_however_far_the_page_scrolls(page):
+@pytest.mark.parametrize("size", [(1366, 900), (820, 1180), (390, 844)], ids=["laptop", "tablet", "phone"])
+def test_the_emergency_stop_stays_on_screen_however_far_the_page_scrolls(page, size):
+    """At the top right on a laptop or a tablet; at the foot of a phone's screen, under the thumb,
+    where the end of the page still scrolls clear of it."""
+    page.set_viewport_size({"width": size[0], "height": size[1]})
     go(page, "access")
     page.evaluate("window.scrollTo(0, document.body.scrollHeight)")
     page.wait_for_function("scrollY > 300")
     box = page.locator("#estop").bounding_box()
-    assert 0 <= box["y"] and box["y"] + box["height"] <= 200, box
+    if size[0] >= 700:
+        assert 0 <= box["y"] and box["y"] + box["height"] <= 200, box
+    else:
+        assert size[1] - 100 <= box["y"] and box["y"] + box["height"] <= size[1], box
+        last = page.locator("#view button:visible").last.bounding_box()   # the page's last control ...
+        assert last["y"] + last["height"] <= box["y"] - page.locator("#estop-hint").bounding_box()["height"], \
+            (last, box)                                                   # ... clear of the stop
+        screenshot(page, "estop-phone")
 
 
 def test_resting_the_pointer_on_a_task_launches_it_and_passing_over_it_chooses_nothing(page, kitchen, task):

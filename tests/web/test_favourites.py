@@ -26,6 +26,44 @@ def test_the_carers_order_comes_first_then_the_most_used_then_by_name():
     assert Usage(uses={}, order=["task:gone", "task:b"]).rank(["task:a", "task:b"]) == ["task:b", "task:a"]
 
 
+def test_what_the_person_uses_lately_comes_before_what_they_used_long_ago(tmp_path):
+    day, now = 24 * 3600.0, 1_800_000_000.0
+    fav = Favourites(Folder(tmp_path))
+    for _ in range(10):
+        fav.used(task_key("Brush my teeth"), now=now - 120 * day)        # every day, last winter
+    for _ in range(2):
+        fav.used(task_key("Give me the red can"), now=now - day)         # twice, this week
+    usage = fav.read()
+    assert usage.rank([task_key("Brush my teeth"), task_key("Give me the red can")], now=now) == [
+        task_key("Give me the red can"), task_key("Brush my teeth")]
+    assert usage.uses[task_key("Brush my teeth")] == 10                  # the count the Access page shows
+    # Used the same long ago, more uses still come first; a file from before `last` keeps its counts.
+    assert Usage({"task:a": 3, "task:b": 5}, []).rank(["task:a", "task:b"], now=now) == ["task:b", "task:a"]
+
+
+def test_a_trip_to_a_place_counts_once_however_it_was_sent(tmp_path):
+    """Nav's status names the place of its new goal: a trip from the page, the voice, the bridge
+    or the command line counts once, and a trip to a point of the map not at all."""
+    from asibot import keys
+    from asibot.messages import NavStatus
+    from asibot.web.trips import TripCounter
+    fav = Favourites(Folder(tmp_path))
+    trips = TripCounter(fav.used)
+    key = keys.nav_status("pioneer-sim")
+
+    def status(goal_id: int, state: str, place: str = "") -> None:
+        trips.on_status(key, NavStatus(goal_id=goal_id, state=state, text="", place=place))
+
+    status(0, "idle")
+    for _ in range(5):                                   # the status repeats while the robot drives
+        status(1, "active", "fridge")
+    status(1, "succeeded", "fridge")
+    status(2, "active")                                  # a point of the map: no place
+    status(3, "active", "sofa")
+    status(1, "active", "fridge")                        # nav restarted: its goals count from 1 again
+    assert fav.read().uses == {place_key("pioneer-sim", "fridge"): 2, place_key("pioneer-sim", "sofa"): 1}
+
+
 def test_uses_and_the_order_are_kept_and_a_hand_edited_file_keeps_what_makes_sense(tmp_path):
     folder = Folder(tmp_path)
     fav = Favourites(folder)
@@ -41,7 +79,7 @@ def test_uses_and_the_order_are_kept_and_a_hand_edited_file_keeps_what_makes_sen
     kept = fav.read()
     assert kept.uses == {"task:a": 3} and kept.order == ["task:a"]
     (tmp_path / FILE).write_text("{not json")
-    assert fav.read() == Usage({}, [])
+    assert fav.read() == Usage({}, [], {})
     assert (tmp_path / (FILE + ".unreadable")).read_text() == "{not json"   # kept aside, not lost
     fav.used(task_key("a"))
     assert fav.read().uses == {"task:a": 1}

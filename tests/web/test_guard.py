@@ -23,7 +23,9 @@ STRANGER = "http://127.0.0.1:9999"      # another server on this machine: anothe
 def routes(svc) -> list[tuple[str, str]]:
     """(method, path) of every API route that changes something (from the API's own description),
     with the robot and the names filled in."""
-    app = svc.app.app.app                 # PageGuard -> BodyLimit -> FastAPI
+    app = svc.app
+    while not hasattr(app, "openapi"):    # PageGuard -> BodyLimit -> Compressed -> FastAPI
+        app = app.app
     found = []
     for path, methods in app.openapi()["paths"].items():
         path = re.sub(r"\{[a-z_]+\}", "x", path.replace("{robot}", API_ROBOT))

@@ -179,6 +179,11 @@ def test_the_fridge_is_a_few_presses_from_home_and_the_trip_is_shown_on_the_map(
         presses.to("Cancel the trip")
         wait_until(lambda: (_nav(apartment)["status"] or {}).get("state") != "active", timeout=10,
                    message="the trip was not canceled")
+    # Each trip counted once, from nav's status (as a trip sent by the voice or the bridge is).
+    def uses() -> dict:
+        return {i["key"]: i["uses"] for i in http(apartment, "GET", "api/favourites")["items"]}
+    wait_until(lambda: uses()["place:pioneer-sim/fridge"] >= 1 and uses()["place:pioneer-sim/desk"] >= 1,
+               timeout=10, message=lambda: f"the trips were not counted: {uses()}")
 
 
 def _nav(stack) -> dict:

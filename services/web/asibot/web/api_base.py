@@ -17,7 +17,6 @@ from asibot.client import NavClient
 from asibot.errors import RpcError
 from asibot.web.models import Number, RobotId, Strict
 from asibot.web.routing import known, off_loop, web_of
-from asibot.web.userdata.favourites import place_key
 
 router = APIRouter(prefix="/api/base")
 
@@ -95,10 +94,9 @@ async def goto(robot: RobotId, body: Goal, request: Request) -> dict:
     else:
         theta = math.radians(body.theta_deg) if body.theta_deg is not None else _facing(request, robot, x, y)
         target = [float(x), float(y), theta]
-    reply = dict(await off_loop(_nav(request, robot).goto_reply, target))
-    if isinstance(target, str):      # a named place: Home offers the usual ones first
-        await off_loop(web_of(request).data.favourites.used, place_key(robot, target))
-    return reply
+    # A trip to a named place is counted (Home offers the usual ones first) by trips.py, from
+    # nav's status, as the trips the voice and the bridge send.
+    return dict(await off_loop(_nav(request, robot).goto_reply, target))
 
 
 def _facing(request: Request, robot: str, x: float, y: float) -> float:

@@ -17,8 +17,9 @@ from typing import Iterator
 
 import uvicorn
 
-from asibot import local_http, runtime
+from asibot import keys, local_http, runtime
 from asibot.bus import Bus
+from asibot.messages import NavStatus
 from asibot.web import guard, lan as lan_access
 from asibot.web.app import Web, create_app, stop_quietly
 from asibot.web.cameras import Cameras
@@ -27,6 +28,7 @@ from asibot.web.live import Live
 from asibot.web.motion import Motion
 from asibot.web.runner import ProgramRunner, RunResult
 from asibot.web.tasks_bus import TaskDesk
+from asibot.web.trips import TripCounter
 from asibot.web.userdata import UserData, default_root
 from asibot.web.voice_relay import VoiceRelay
 from asibot.web.world import World
@@ -79,6 +81,8 @@ class WebService(runtime.Service):
             on_start=lambda status: live.send({"type": "run", "status": status}),
             stop_robot=lambda robot: stop_quietly(motion, robot, "its program ended"))
         tasks = TaskDesk(bus, data, runner, is_live=lambda robot: robot in self.fleet.ids())
+        trips = TripCounter(data.favourites.used)
+        bus.subscribe(keys.every_robot(keys.nav_status), NavStatus, trips.on_status, with_key=True)
         names = [host, *local_http.names_from_env(HOSTS_ENV)]
         if lan:
             names += [*lan_access.lan_addresses(), socket.gethostname(), f"{socket.gethostname()}.local"]

@@ -1,14 +1,17 @@
 """What this person uses most: how often each task was launched and each place gone to, and the
 order the carer chose, in favourites.json of the data folder.
 
-The page's Home offers the person's tasks and places one level deep, most used first, so one
-switch reaches the usual ones in a few presses; a carer who knows better sets the order, and
-what the order leaves out follows by use. An item is named by a key:
+The page's Home offers the person's tasks and places one level deep, most used lately first, so
+one switch reaches the usual ones in a few presses; a carer who knows better sets the order, and
+what the order leaves out follows by use. Use is counted, and weighs half for every two weeks
+since an item was last used: what the person does now comes before what they did last winter.
+An item is named by a key:
 
     task:<task name>                 a Launcher task
     place:<robot>/<place name>       a named place of a mobile robot
 
     {"uses": {"task:Give me the red can": 4, "place:pioneer-sim/fridge": 2},
+     "last": {"task:Give me the red can": 1795000000.0, "place:pioneer-sim/fridge": 1794000000.0},
      "order": ["place:pioneer-sim/fridge", "task:Give me the red can"]}
 
 Plain Python, no web framework and no bus; writes are atomic and under the folder's one lock.
@@ -20,7 +23,8 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-from dataclasses import dataclass
+import time
+from dataclasses import dataclass, field
 
 from asibot.files import write_atomic
 from asibot.web.userdata.errors import UserDataError
@@ -31,6 +35,8 @@ FILE = "favourites.json"
 MAX_KEYS = 500
 MAX_KEY = 200
 KINDS = ("task", "place")
+#: s after which a use weighs half as much in the order: two weeks.
+HALF_LIFE = 14 * 24 * 3600.0
 
 
 def task_key(name: str) -> str:
@@ -56,13 +62,22 @@ def check_key(key: object) -> str:
 class Usage:
     uses: dict[str, int]
     order: list[str]
+    last: dict[str, float] = field(default_factory=dict)    # when each was last used, epoch s
 
-    def rank(self, keys: list[str]) -> list[str]:
-        """`keys` in the person's order: the carer's first, as the carer put them; then by use
-        (most first), tasks before places (a task is what the Launcher is for), then by name."""
+    def weight(self, key: str, now: float) -> float:
+        """Its uses, halved for every HALF_LIFE since its last (a file from before `last` was
+        kept: its count as it is)."""
+        age = max(0.0, now - self.last.get(key, now))
+        return self.uses.get(key, 0) * 0.5 ** (age / HALF_LIFE)
+
+    def rank(self, keys: list[str], now: float | None = None) -> list[str]:
+        """`keys` in the person's order: the carer's first, as the carer put them; then by use,
+        most used lately first; then tasks before places (a task is what the Launcher is for),
+        then by name."""
+        now = time.time() if now is None else now
         chosen = [k for k in self.order if k in keys]
         rest = sorted((k for k in keys if k not in chosen),
-                      key=lambda k: (-self.uses.get(k, 0), KINDS.index(k.partition(":")[0]), k.casefold()))
+                      key=lambda k: (-self.weight(k, now), KINDS.index(k.partition(":")[0]), k.casefold()))
         return chosen + rest
 
 
@@ -86,27 +101,34 @@ class Favourites:
                     with contextlib.suppress(OSError):
                         os.replace(path, aside)
             raw = raw if isinstance(raw, dict) else {}
-            uses, order = raw.get("uses"), raw.get("order")
-            kept_uses = {k: v for k, v in (uses.items() if isinstance(uses, dict) else ())
-                         if _is_key(k) and isinstance(v, int) and not isinstance(v, bool) and v > 0}
+            uses, order, last = raw.get("uses"), raw.get("order"), raw.get("last")
+            kept_uses = dict(list({k: v for k, v in (uses.items() if isinstance(uses, dict) else ())
+                                   if _is_key(k) and isinstance(v, int) and not isinstance(v, bool) and v > 0
+                                   }.items())[:MAX_KEYS])
+            kept_last = {k: float(v) for k, v in (last.items() if isinstance(last, dict) else ())
+                         if k in kept_uses and isinstance(v, (int, float)) and not isinstance(v, bool)}
             kept_order = list(dict.fromkeys(k for k in (order if isinstance(order, list) else []) if _is_key(k)))
-            return Usage(dict(list(kept_uses.items())[:MAX_KEYS]), kept_order[:MAX_KEYS])
+            return Usage(kept_uses, kept_order[:MAX_KEYS], kept_last)
 
     def _write(self, usage: Usage) -> None:
-        write_atomic(self.folder.root / FILE,
-                     (json.dumps({"uses": usage.uses, "order": usage.order}, indent=1) + "\n").encode())
+        body = {"uses": usage.uses, "last": usage.last, "order": usage.order}
+        write_atomic(self.folder.root / FILE, (json.dumps(body, indent=1) + "\n").encode())
 
-    def used(self, key: str) -> None:
+    def used(self, key: str, now: float | None = None) -> None:
         """Count one use of `key` (a launch, a trip). It never raises: the launch or the trip it
         counts has happened, and a full disk must not make it look refused."""
+        now = time.time() if now is None else now
         try:
             check_key(key)
             with self.folder.lock:
                 usage = self.read()
                 if key not in usage.uses and len(usage.uses) >= MAX_KEYS:
-                    # Forget the least used: what is used now matters more.
-                    del usage.uses[min(usage.uses, key=usage.uses.__getitem__)]
+                    # Forget the least used lately: what is used now matters more.
+                    gone = min(usage.uses, key=lambda k: usage.weight(k, now))
+                    del usage.uses[gone]
+                    usage.last.pop(gone, None)
                 usage.uses[key] = usage.uses.get(key, 0) + 1
+                usage.last[key] = now
                 self._write(usage)
         except (OSError, UserDataError) as exc:
             log.warning("a use of %r was not counted: %s", key, exc)

@@ -290,6 +290,7 @@ function show() {
   refresh();
   const target = scan.entry && (scan.entry.box || scan.entry.nodes[0]);
   if (target) target.scrollIntoView({ block: 'nearest', inline: 'nearest' });
+  place();      // where the page scrolled to: the label's place is chosen for what is on screen now
   scan.steps += 1;
   ring.dataset.step = String(scan.steps);
   ring.hidden = false;
