@@ -20,6 +20,8 @@ from asibot.testing import free_port, wait_until
 
 from .conftest import CHROMIUM, CHROMIUM_ARGS
 
+pytestmark = pytest.mark.slow     # the kitchen simulation and two chromium pages
+
 ROBOT = "asibot-sim"
 #: A body every route that takes one could accept (a step, a move, a program, a goal ...).
 BODY = {"space": "joint", "axis": 0, "direction": 1, "level": 5, "kind": "movj", "values": [60, 10, 10, 10, 0],

@@ -17,6 +17,8 @@ from asibot.testing import wait_until
 
 from .conftest import API_ROBOT as ROBOT, fresh_page, screenshot
 
+pytestmark = pytest.mark.slow     # the kitchen simulation and chromium: the arm moves in real time
+
 CAMERA = "kitchen"
 #: The red can's centre in the arm's base frame, m, and its radius (kitchen.xml).
 CAN, CAN_R = (0.0, 0.5, 0.02), 0.033
