@@ -37,6 +37,12 @@ def test_serving_beyond_this_machine_needs_lan_mode(tmp_path, monkeypatch):
             service.build(bus, args(tmp_path, new_token=True))
 
 
+def read_qr(image) -> str:
+    """The text of a QR code as a phone's camera reads it. OpenCV's classic detector misses about
+    one valid code in fifty (measured on random tokens), and its ArUco-based one reads those."""
+    return cv2.QRCodeDetector().detectAndDecode(image)[0] or cv2.QRCodeDetectorAruco().detectAndDecode(image)[0]
+
+
 def test_lan_mode_serves_https_and_only_with_the_token(tmp_path, capsys):
     with memory_bus("lan") as ep, Bus("web", ep) as bus:
         a = args(tmp_path, host="127.0.0.1", lan=True)
@@ -75,7 +81,7 @@ def test_lan_mode_serves_https_and_only_with_the_token(tmp_path, capsys):
                 png = phone.get(url + "/api/phone/qr.png")
                 assert png.headers["content-type"] == "image/png"
                 image = cv2.imdecode(np.frombuffer(png.content, np.uint8), cv2.IMREAD_GRAYSCALE)
-                assert cv2.QRCodeDetector().detectAndDecode(image)[0] == how["urls"][0]
+                assert read_qr(image) == how["urls"][0]
             assert httpx.get(url + "/api/robots", headers={"Authorization": f"Bearer {token}"},
                              verify=context).status_code == 200
             with pytest.raises(httpx.HTTPError):
