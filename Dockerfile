@@ -1,31 +1,63 @@
 # One image for every service; compose.yaml gives each service its own command.
+#
+#   docker build -t asibot:latest .
+#
+# Both bases are build arguments, pinned by digest for a reproducible build. A machine without
+# an image registry passes its own (docs/docker.md): a Debian bookworm made with debootstrap,
+# and a Node.js LTS image made from it.
+ARG BASE=debian:bookworm-slim@sha256:7b140f374b289a7c2befc338f42ebe6441b7ea838a042bbd5acbfca6ec875818
+ARG NODE=node:22-bookworm-slim@sha256:43ac6c60b8f89723f746e8a92ce91abd5017e627ce1ddfe4238355d3a30b772c
 
-# The web page's npm packages, pinned in package-lock.json, bundled once (as ./bootstrap does).
-FROM node:20-bookworm-slim AS web
+# ---- the web page's npm packages, pinned in package-lock.json, bundled once (as ./bootstrap does)
+FROM ${NODE} AS web
 WORKDIR /web
+COPY docker/ /tmp/docker/
 COPY services/web/frontend/package.json services/web/frontend/package-lock.json services/web/frontend/build.mjs ./frontend/
 COPY services/web/frontend/entries ./frontend/entries
-RUN npm ci --prefix frontend --no-audit --no-fund && node frontend/build.mjs
+# docker/extra-ca.crt: a download proxy's certificate authority, used here and never kept.
+RUN if [ -f /tmp/docker/extra-ca.crt ]; then export NODE_EXTRA_CA_CERTS=/tmp/docker/extra-ca.crt; fi \
+ && npm ci --prefix frontend --ignore-scripts --no-audit --no-fund --loglevel=error \
+ && node frontend/build.mjs
 
-FROM python:3.11-slim-bookworm
-
-ENV PYTHONUNBUFFERED=1 \
-    PIP_NO_CACHE_DIR=1 \
-    MUJOCO_GL=osmesa
-
-# libosmesa6: MuJoCo's offscreen renderer without a GPU. libgl1/libglib2.0-0: OpenCV and MuJoCo.
+# ---- the Python packages, from the lock file, into a virtual environment copied below whole
+FROM ${BASE} AS python
+COPY docker/ /tmp/docker/
+COPY requirements/build.txt requirements/runtime.txt /tmp/requirements/
 RUN apt-get update \
- && apt-get install -y --no-install-recommends libosmesa6 libgl1 libglib2.0-0 \
- && rm -rf /var/lib/apt/lists/*
+ && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends python3 python3-venv ca-certificates \
+ && rm -rf /var/lib/apt/lists/* \
+ && python3 -m venv /opt/asibot \
+ && if [ -f /tmp/docker/extra-ca.crt ]; then export PIP_CERT=/tmp/docker/extra-ca.crt; fi \
+ && /opt/asibot/bin/pip install --no-cache-dir --disable-pip-version-check -q --require-hashes -r /tmp/requirements/build.txt \
+ && /opt/asibot/bin/pip install --no-cache-dir --disable-pip-version-check -q --require-hashes -r /tmp/requirements/runtime.txt
+# Our own packages, every one but the test helpers (libs/testing), built with the locked
+# setuptools: nothing unlocked is fetched. (Few layers: vfs storage copies each one whole.)
+COPY . /src
+RUN cd /src \
+ && /opt/asibot/bin/pip install --no-cache-dir --disable-pip-version-check -q --no-deps --no-build-isolation \
+        ./libs/common ./libs/cli $(ls -d services/*/) \
+ && /opt/asibot/bin/pip check
 
+# ---- what runs
+FROM ${BASE}
+# python3: the venv's interpreter. libosmesa6 libgl1 libglib2.0-0: MuJoCo's offscreen renderer
+# and OpenCV without a GPU. libgomp1: pinocchio (kinematics). espeak-ng: spoken feedback.
+# libportaudio2: a robot's own microphone. bubblewrap: the sandbox of user programs.
+RUN apt-get update \
+ && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends \
+        python3 libosmesa6 libgl1 libglib2.0-0 libgomp1 espeak-ng libportaudio2 bubblewrap \
+ && apt-get clean && rm -rf /var/lib/apt/lists/* /var/cache/apt/archives/*.deb \
+ && useradd --create-home --uid 1000 --shell /usr/sbin/nologin asibot \
+ && mkdir -p /app/recordings /data \
+ && chown asibot:asibot /app/recordings /data
+COPY --from=python /opt/asibot /opt/asibot
+COPY --from=web /web/asibot/web/static/vendor /opt/asibot/lib/python3.11/site-packages/asibot/web/static/vendor
+ENV PATH=/opt/asibot/bin:$PATH \
+    PYTHONUNBUFFERED=1 \
+    MUJOCO_GL=osmesa \
+    ASIBOT_DATA=/data
 WORKDIR /app
-COPY libs ./libs
-COPY services ./services
-COPY --from=web /web/asibot/web/static/vendor ./services/web/asibot/web/static/vendor
-# Every package of the `asibot` namespace but the test helpers (libs/testing).
-RUN pip install ./libs/common ./libs/cli ./services/*/
-
+USER asibot
 # Recordings and user data live in volumes, never in the image.
-ENV ASIBOT_DATA=/data
 VOLUME ["/app/recordings", "/data"]
 CMD ["asibot", "--help"]

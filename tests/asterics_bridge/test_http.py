@@ -4,6 +4,7 @@ import base64
 import http.client
 import json
 import socket
+import threading
 
 from unittest.mock import ANY
 
@@ -27,12 +28,13 @@ def bridge(memory_bus):
 
 
 def request(bridge, method, path, body=None, headers=None, auth=True):
-    """One request, with the bridge's token unless `auth` is False or `headers` carry their own."""
+    """One request, with the bridge's token unless `auth` is False or `headers` carry their own.
+    The answer's headers are looked up as HTTP reads them: names in any case."""
     conn = http.client.HTTPConnection("127.0.0.1", bridge.servers.http_port, timeout=5)
     try:
         conn.request(method, path, body=body, headers={**(AUTH if auth else {}), **(headers or {})})
         r = conn.getresponse()
-        return r.status, dict(r.getheaders()), r.read().decode()
+        return r.status, r.headers, r.read().decode()
     finally:
         conn.close()
 
@@ -88,7 +90,7 @@ def test_cors_preflight_of_the_allowed_grid(bridge):
 
 def test_a_program_s_preflight_gets_no_cors(bridge):
     status, headers, _ = request(bridge, "OPTIONS", "/command", auth=False)
-    assert status == 204 and not any(h.startswith("Access-Control") for h in headers)
+    assert status == 204 and not any(h.lower().startswith("access-control") for h in headers)
 
 
 def test_status_for_live_elements(bridge):
@@ -123,7 +125,8 @@ def test_status_tells_the_pose_on_the_map_once_nav_has_one(bridge):
     (b"POST /command HTTP/1.1\r\nContent-Length: 4\r\n\r\n\xff\xfe\xfd\xfc", b"400"),
     (b"POST /command HTTP/1.1\r\nContent-Length: 4\r\nContent-Type: application/json\r\n\r\n{{{{", b"400"),
     (b"POST /command HTTP/1.1\r\nContent-Length: 2\r\nContent-Type: application/json\r\n\r\n[]", b"400"),
-    (b"POST /command HTTP/1.1\r\nTransfer-Encoding: chunked\r\n\r\n5\r\nhello\r\n0\r\n\r\n", b"411"),
+    (b"POST /command HTTP/1.1\r\nTransfer-Encoding: chunked\r\n\r\n" + b"400\r\n" + b"x" * 1024 + b"\r\n"
+     + b"1\r\nx\r\n0\r\n\r\n", b"413"),
     (b"POST /command HTTP/1.1\r\nContent-Length: -3\r\n\r\n", b"400"),
     (b"POST /command HTTP/1.1\r\nX-Big: " + b"a" * 5000 + b"\r\n\r\n", b"431"),
     (b"garbage\r\n\r\n", b"400"),
@@ -143,6 +146,73 @@ def test_a_huge_body_is_refused_unread(bridge):
     with socket.create_connection(("127.0.0.1", bridge.servers.http_port), timeout=5) as s:
         s.sendall(b"POST /command HTTP/1.1\r\nHost: localhost\r\nContent-Length: 100000000\r\n\r\n" + b"x" * 65536)
         assert s.recv(200).split(b" ")[1] == b"413"
+
+
+def test_a_chunked_body_is_taken(bridge):
+    """What a client that streams its body sends (no Content-Length): the command, in chunks."""
+    chunks = b"".join(b"%x\r\n%s\r\n" % (len(part), part) for part in (b"for", b"ward")) + b"0\r\n\r\n"
+    reply = raw(bridge, b"POST /command HTTP/1.1\r\nHost: 127.0.0.1\r\nAuthorization: Bearer "
+                + HTTP_TOKEN.encode() + b"\r\nTransfer-Encoding: chunked\r\nConnection: close\r\n\r\n" + chunks)
+    assert reply.startswith(b"HTTP/1.1 200 ") and reply.endswith(b"\r\n\r\nok: forward, until you say stop\n")
+    assert bridge.nav.requests("primitive") == [{"name": "forward", "continuous": True}]
+
+
+def test_keep_alive_two_requests_on_one_connection(bridge):
+    with socket.create_connection(("127.0.0.1", bridge.servers.http_port), timeout=5) as s:
+        for text in (b"faster", b"slower"):
+            s.sendall(b"POST /command HTTP/1.1\r\nHost: 127.0.0.1\r\nAuthorization: Bearer " + HTTP_TOKEN.encode()
+                      + b"\r\nContent-Length: %d\r\n\r\n%s" % (len(text), text))
+            r = http.client.HTTPResponse(s)
+            r.begin()
+            assert (r.status, r.read(), r.will_close) == (200, b"ok: speed 3 of 5\n" if text == b"faster"
+                                                          else b"ok: speed 2 of 5\n", False)
+    assert len(bridge.nav.requests("settings")) == 2
+
+
+def test_a_stop_does_not_wait_behind_a_slow_command(bridge):
+    gate = threading.Event()
+    slow = bridge.arm._act
+    bridge.arm._act = lambda req: (gate.wait(10), slow(req))[1]
+    answers: dict[str, tuple] = {}
+    grab = threading.Thread(target=lambda: answers.update(grab=request(bridge, "POST", "/command", "grab")))
+    grab.start()
+    try:
+        wait_until(lambda: bridge.arm.verbs() == ["act"])
+        for auth in (True, False):       # with the token, and without (a session of its own)
+            status, _, body = request(bridge, "POST", "/command", "stop", auth=auth)
+            assert (status, body) == (200, "ok: stopped base and arm\n")
+        assert "grab" not in answers
+    finally:
+        gate.set()
+        grab.join(10)
+    assert answers["grab"][::2] == (200, "ok: holding something\n")
+
+
+def test_slow_heads_and_bodies_are_not_waited_for(memory_bus):
+    """A head must come whole within `http_idle_s` (whole seconds) of the connection being free,
+    however many bytes trickle in; a body within `http_idle_s` of its head."""
+    b = Bridge(memory_bus, limits=Limits(http_idle_s=0.5))
+    try:
+        with socket.create_connection(("127.0.0.1", b.servers.http_port), timeout=5) as s:
+            s.sendall(b"POST /command HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Slow: ")
+            s.settimeout(0.1)
+
+            def closed() -> bool:
+                try:
+                    s.sendall(b"a")
+                    return s.recv(1) == b""
+                except TimeoutError:
+                    return False
+                except OSError:        # the bridge closed it, and said so to this byte
+                    return True
+            wait_until(closed, 10, interval=0.1, message="a head trickling in held its connection")
+        with socket.create_connection(("127.0.0.1", b.servers.http_port), timeout=5) as s:
+            s.sendall(b"POST /command HTTP/1.1\r\nHost: 127.0.0.1\r\nAuthorization: Bearer " + HTTP_TOKEN.encode()
+                      + b"\r\nContent-Length: 7\r\n\r\nfor")
+            assert s.recv(200).startswith(b"HTTP/1.1 408 ")
+        assert b.nav.calls == []
+    finally:
+        b.close()
 
 
 def test_keep_alive_serves_several_requests(bridge):

@@ -180,4 +180,4 @@ def test_driver_without_a_port_says_what_to_pass(router):
 def test_emulator_refuses_a_bad_map(tmp_path):
     r = subprocess.run([sys.executable, "-m", "asibot.base_driver.emulator", "--map", str(tmp_path / "none.yaml"),
                         "--listen", f"127.0.0.1:{free_port()}"], capture_output=True, text=True, timeout=20)
-    assert r.returncode == 2 and "cannot read the map file" in r.stderr
+    assert r.returncode == 2 and "Cannot read the map file" in r.stderr

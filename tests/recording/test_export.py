@@ -1,18 +1,17 @@
-"""`asibot export --foxglove`: recordings rewritten as JSON with Foxglove's schemas.
+"""`asibot export --foxglove`: recordings rewritten by Foxglove's SDK, in Foxglove's schemas.
 
-Two independent checks on every exported message: it validates against the JSON schema the
-file carries (jsonschema), and Foxglove's own SDK (foxglove-sdk) accepts its fields when it
-builds the official message, so a misspelt or mistyped field fails here, not in the app.
+The file is read back with the mcap reader, as the Foxglove app reads it: each channel's schema
+name and encoding, every well-known message decoded from the protobuf schema the file carries
+(not by the SDK that wrote it), every JSON message validated against its JSON schema, and the
+values (an image's bytes above all) compared with what was recorded.
 """
 
 from __future__ import annotations
 
-import base64
 import json
 import math
 from pathlib import Path
 
-import foxglove.messages as fm
 import jsonschema
 import numpy as np
 import pytest
@@ -28,6 +27,9 @@ from asibot.recorder.writer import LeanWriter
 
 T0 = 1_795_000_000_123_456_789
 ROBOT, BASE = "asibot-sim", "pioneer-sim"
+DEPTH = np.arange(12, dtype=np.float32).reshape(3, 4) / 4
+JPEG = b"\xff\xd8 not really \xff\xd9"
+MAP = np.array([[0, 100, -1], [0, 0, 100]], np.int8)
 
 
 def matrix_of_quaternion(q) -> np.ndarray:
@@ -55,139 +57,183 @@ def write_recording(path: Path, items: list[tuple[str, bytes]], *, finish: bool 
 
 
 def session() -> list[tuple[str, bytes]]:
-    depth = np.arange(12, dtype=np.float32).reshape(3, 4) / 4
     return [(k, m.encode(msg)) for k, msg in [
         (keys.arm_state(ROBOT), m.ArmState(names=["q1", "q2"], positions=[0.1, -0.2], velocities=[0.0, 0.5],
                                            mode="position", stamp=T0)),
         (keys.cart_state(ROBOT), m.CartState(state="movl", pose=[0.5, 0.5, 1.0, math.pi / 2, 0.3],
                                              joints=[0, 0, 0, 0, 0], stamp=T0)),
-        (keys.base_odom(BASE), m.Odometry(x=1.0, y=2.0, theta=math.pi / 2, vx=0.3, stamp=T0)),
-        (keys.camera_depth(BASE, "front"), m.DepthImage(depth=depth, stamp=T0)),
-        (keys.camera_depth(BASE, "back"), m.DepthImage(depth=(depth * 1000).astype(np.uint16), stamp=T0)),
-        (keys.camera_rgb(BASE, "rgb"), m.RgbImage(jpeg=b"\xff\xd8 not really \xff\xd9", width=4, height=3,
-                                                  stamp=T0)),
+        (keys.base_odom(BASE), m.Odometry(x=1.0, y=2.0, theta=math.pi / 2, vx=0.3, wz=-0.1, stamp=T0)),
+        (keys.camera_depth(BASE, "front"), m.DepthImage(depth=DEPTH, stamp=T0)),
+        (keys.camera_depth(BASE, "back"), m.DepthImage(depth=(DEPTH * 1000).astype(np.uint16), stamp=T0)),
+        (keys.camera_rgb(BASE, "rgb"), m.RgbImage(jpeg=JPEG, width=4, height=3, stamp=T0)),
         (keys.camera_info(BASE, "front"), m.CameraInfo(width=4, height=3, fx=2.0, fy=2.5, cx=1.5, cy=1.0,
                                                        pose=[0.2, 0.0, 0.3, 0.5, -0.5, 0.5, -0.5],
                                                        frame="front_optical", stamp=T0)),
         (keys.scan(BASE), m.LaserScan(angle_min=-1.0, angle_increment=0.5, range_min=0.1, range_max=5.0,
                                       ranges=np.array([1.0, np.inf, 2.0, np.nan, 3.0]), stamp=T0)),
+        (keys.nav_map(BASE), m.NavMap(resolution=0.05, origin=[-1.0, 2.0, 0.0], data=MAP, name="home", stamp=T0)),
+        (keys.nav_pose(BASE), m.NavPose(x=1.0, y=2.0, theta=0.0, covariance=[0.1] * 9, localised=True,
+                                        particles=np.array([[1.0, 2.0, 0.0], [1.1, 2.1, 0.2]], np.float32),
+                                        stamp=T0)),
+        (keys.nav_path(BASE), m.NavPath(goal_id=4, points=np.array([[0.0, 0.0], [1.0, 0.5]], np.float32),
+                                        length=1.1, stamp=T0)),
         ("events", m.Event(level="warning", code="estop", text="Emergency stop engaged.", stamp=T0)),
+        (keys.voice_audio("web-1"), m.AudioChunk(data=np.array([0.5, -1.0, 2.0], "<f4").tobytes(), rate=16000,
+                                                 sample="float32", stamp=T0)),
         (keys.base_sonar(BASE), m.Sonar(ranges=[1.0, float("nan")], angles=[0.5, -0.5], stamp=T0)),
         (keys.gripper_state(ROBOT), m.GripperState(opening=0.04, holding=True, stamp=T0)),
     ]]
 
 
-def read_export(path: Path) -> list[tuple[str, str, dict, dict, int]]:
-    """(topic, schema name, schema, message, log_time) of every exported message."""
+#: What session() becomes: the schema of each topic.
+SCHEMAS = {
+    keys.arm_state(ROBOT): "foxglove.JointStates", f"{keys.arm_state(ROBOT)}/extra": "asibot.ArmState.extra",
+    keys.cart_state(ROBOT): "foxglove.PoseInFrame", f"{keys.cart_state(ROBOT)}/extra": "asibot.CartState.extra",
+    keys.base_odom(BASE): "foxglove.Odometry", "/tf": "foxglove.FrameTransform",
+    keys.camera_depth(BASE, "front"): "foxglove.RawImage", keys.camera_depth(BASE, "back"): "foxglove.RawImage",
+    keys.camera_rgb(BASE, "rgb"): "foxglove.CompressedImage",
+    keys.camera_info(BASE, "front"): "foxglove.CameraCalibration", keys.scan(BASE): "foxglove.LaserScan",
+    keys.nav_map(BASE): "foxglove.Grid", f"{keys.nav_map(BASE)}/extra": "asibot.NavMap.extra",
+    keys.nav_pose(BASE): "foxglove.PoseInFrame", f"{keys.nav_pose(BASE)}/particles": "foxglove.PosesInFrame",
+    f"{keys.nav_pose(BASE)}/extra": "asibot.NavPose.extra",
+    keys.nav_path(BASE): "foxglove.PosesInFrame", f"{keys.nav_path(BASE)}/extra": "asibot.NavPath.extra",
+    "events": "foxglove.Log", keys.voice_audio("web-1"): "foxglove.RawAudio",
+    keys.base_sonar(BASE): "asibot.Sonar", keys.gripper_state(ROBOT): "asibot.GripperState",
+}
+MESSAGES = len(SCHEMAS) + 1          # one message a topic, and /tf has two (odometry, camera mount)
+
+
+def read_export(path: Path, protobuf) -> list[tuple[str, str, dict, int]]:
+    """(topic, schema name, decoded message, log_time) of every exported message, each decoded
+    as Foxglove decodes it: protobuf from the file's own schema, JSON checked against its schema."""
     out = []
     with open(path, "rb") as f:
         for schema, channel, message in make_reader(f).iter_messages(log_time_order=False):
-            assert (schema.encoding, channel.message_encoding) == ("jsonschema", "json")
-            out.append((channel.topic, schema.name, json.loads(schema.data), json.loads(message.data),
-                        message.log_time))
+            if schema.name.startswith("foxglove."):
+                assert (schema.encoding, channel.message_encoding) == ("protobuf", "protobuf"), schema.name
+                obj = protobuf(schema.data).decode(schema.name, message.data)
+            else:
+                assert (schema.encoding, channel.message_encoding) == ("jsonschema", "json"), schema.name
+                obj, body = json.loads(message.data), json.loads(schema.data)
+                jsonschema.validate(obj, body)
+                assert body["title"] == schema.name
+            out.append((channel.topic, schema.name, obj, message.log_time))
     return out
 
 
-# Foxglove's SDK builds its messages from keyword arguments: nested objects by field name.
-NESTED = {"timestamp": lambda d: fm.Timestamp(d["sec"], d["nsec"]),
-          "position": lambda d: fm.Vector3(**d), "translation": lambda d: fm.Vector3(**d),
-          "orientation": lambda d: fm.Quaternion(**d), "rotation": lambda d: fm.Quaternion(**d),
-          "pose": lambda d: fm.Pose(**{k: NESTED[k](v) for k, v in d.items()}),
-          "joints": lambda js: [fm.JointState(**j) for j in js],
-          "level": lambda v: getattr(fm.LogLevel, ["Unknown", "Debug", "Info", "Warning", "Error", "Fatal"][v])}
-BYTES = {"data"}
-OURS = {"mode", "fault", "state", "vx", "wz"}        # documented extra fields of ours
-
-
-def foxglove_accepts(schema_name: str, obj: dict) -> None:
-    cls = getattr(fm, schema_name.removeprefix("foxglove."))
-    kwargs = {}
-    for k, v in obj.items():
-        if k in OURS or (k == "joints" and schema_name == "foxglove.PoseInFrame"):
-            continue
-        kwargs[k] = base64.b64decode(v) if k in BYTES else NESTED[k](v) if k in NESTED else v
-    cls(**kwargs).encode()
-
-
-def test_every_message_validates_and_foxglove_builds_the_official_types(tmp_path):
+def test_every_topic_has_its_foxglove_schema_binary_or_json(tmp_path, protobuf):
     src = tmp_path / "session.mcap"
     write_recording(src, session())
     summary = export_foxglove(src)
     assert summary.output == tmp_path / "foxglove" / "session.mcap"
     assert summary.complete and summary.skipped == 0
-    exported = read_export(summary.output)
-    assert summary.messages == len(exported) == 13       # 11 messages, + 2 transforms
-    for topic, name, schema, obj, _ in exported:
-        jsonschema.validate(obj, schema)
-        assert schema["title"] == name
-        if name.startswith("foxglove."):
-            foxglove_accepts(name, obj)
-    by_topic = {(t, n): o for t, n, _, o, _ in exported if t != "/tf"}
-    assert set(n for _, n in by_topic) == {
-        "foxglove.JointStates", "foxglove.PoseInFrame", "foxglove.RawImage", "foxglove.CompressedImage",
-        "foxglove.CameraCalibration", "foxglove.LaserScan", "foxglove.Log", "asibot.Sonar",
-        "asibot.GripperState"}
+    exported = read_export(summary.output, protobuf)
+    assert summary.messages == len(exported) == MESSAGES
+    assert {t: n for t, n, _, _ in exported} == SCHEMAS == summary.schemas
 
 
-def test_values_survive_the_conversion(tmp_path):
+def test_images_are_their_bytes(tmp_path, protobuf):
+    """Not base64 in JSON: the pixels and the JPEG as they were recorded, in a binary field."""
     src = tmp_path / "session.mcap"
     write_recording(src, session())
-    out = read_export(export_foxglove(src, tmp_path / "out.mcap").output)
-    msg = {(t, n): o for t, n, _, o, _ in out if t != "/tf"}
-    tf = {o["child_frame_id"]: o for t, _, _, o, _ in out if t == "/tf"}
-    stamp = {"sec": T0 // 10**9, "nsec": T0 % 10**9}
+    msg = {t: o for t, _, o, _ in read_export(export_foxglove(src).output, protobuf)}
+    front = msg[keys.camera_depth(BASE, "front")]
+    assert (front["encoding"], front["width"], front["height"], front["step"]) == ("32FC1", 4, 3, 16)
+    assert np.array_equal(np.frombuffer(front["data"], "<f4").reshape(3, 4), DEPTH)
+    assert front["frame_id"] == "pioneer-sim/front_optical"
+    back = msg[keys.camera_depth(BASE, "back")]
+    assert (back["encoding"], back["step"]) == ("16UC1", 8)
+    assert np.array_equal(np.frombuffer(back["data"], "<u2").reshape(3, 4), (DEPTH * 1000).astype(np.uint16))
+    rgb = msg[keys.camera_rgb(BASE, "rgb")]
+    assert (rgb["data"], rgb["format"]) == (JPEG, "jpeg")
+    audio = msg[keys.voice_audio("web-1")]
+    assert (audio["format"], audio["sample_rate"], audio["number_of_channels"]) == ("pcm-s16", 16000, 1)
+    assert np.frombuffer(audio["data"], "<i2").tolist() == [16384, -32767, 32767]     # clipped to [-1, 1]
 
-    joints = msg[keys.arm_state(ROBOT), "foxglove.JointStates"]
+
+def test_values_survive_the_conversion(tmp_path, protobuf):
+    src = tmp_path / "session.mcap"
+    write_recording(src, session())
+    out = read_export(export_foxglove(src, tmp_path / "out.mcap").output, protobuf)
+    msg = {t: o for t, _, o, _ in out if t != "/tf"}
+    tf = {o["child_frame_id"]: o for t, _, o, _ in out if t == "/tf"}
+    stamp = {"seconds": T0 // 10**9, "nanos": T0 % 10**9}
+
+    joints = msg[keys.arm_state(ROBOT)]
     assert joints["timestamp"] == stamp
-    assert joints["joints"] == [{"name": "q1", "position": 0.1, "velocity": 0.0},
-                                {"name": "q2", "position": -0.2, "velocity": 0.5}]
-    assert joints["mode"] == "position"
+    assert [(j["name"], j["position"], j["velocity"]) for j in joints["joints"]] == [("q1", 0.1, 0.0),
+                                                                                  ("q2", -0.2, 0.5)]
+    assert msg[f"{keys.arm_state(ROBOT)}/extra"] == {"mode": "position", "fault": "", "stamp": T0}
 
     # The tool pose: the point's convention (Rz(azimuth) Ry Rz) as a quaternion.
-    cart = msg[keys.cart_state(ROBOT), "foxglove.PoseInFrame"]
+    cart = msg[keys.cart_state(ROBOT)]
     assert cart["frame_id"] == "asibot-sim/base"
     q = cart["pose"]["orientation"]
     assert matrix_of_quaternion([q["w"], q["x"], q["y"], q["z"]]) == pytest.approx(
         point_rotation(0.5, 0.5, math.pi / 2, 0.3))
+    assert msg[f"{keys.cart_state(ROBOT)}/extra"]["state"] == "movl"
 
-    odom = msg[keys.base_odom(BASE), "foxglove.PoseInFrame"]
-    assert odom["frame_id"] == "pioneer-sim/odom" and odom["pose"]["position"] == {"x": 1.0, "y": 2.0, "z": 0.0}
+    odom = msg[keys.base_odom(BASE)]
+    assert (odom["frame_id"], odom["body_frame_id"]) == ("pioneer-sim/odom", "pioneer-sim/base")
+    assert odom["pose"]["position"] == {"x": 1.0, "y": 2.0, "z": 0}
     assert odom["pose"]["orientation"] == pytest.approx({"x": 0, "y": 0, "z": math.sqrt(.5), "w": math.sqrt(.5)})
+    assert (odom["linear_velocity"]["x"], odom["angular_velocity"]["z"]) == (0.3, -0.1)
     assert tf["pioneer-sim/base"]["parent_frame_id"] == "pioneer-sim/odom"
     assert tf["pioneer-sim/front_optical"]["parent_frame_id"] == "pioneer-sim/base"
     assert tf["pioneer-sim/front_optical"]["rotation"] == {"x": -0.5, "y": 0.5, "z": -0.5, "w": 0.5}
 
-    front = msg[keys.camera_depth(BASE, "front"), "foxglove.RawImage"]
-    assert (front["encoding"], front["width"], front["height"], front["step"]) == ("32FC1", 4, 3, 16)
-    assert np.frombuffer(base64.b64decode(front["data"]), "<f4").reshape(3, 4)[2, 3] == pytest.approx(11 / 4)
-    assert front["frame_id"] == "pioneer-sim/front_optical"
-    back = msg[keys.camera_depth(BASE, "back"), "foxglove.RawImage"]
-    assert (back["encoding"], back["step"]) == ("16UC1", 8)
-    assert np.frombuffer(base64.b64decode(back["data"]), "<u2")[-1] == 2750
-
-    rgb = msg[keys.camera_rgb(BASE, "rgb"), "foxglove.CompressedImage"]
-    assert base64.b64decode(rgb["data"]) == b"\xff\xd8 not really \xff\xd9" and rgb["format"] == "jpeg"
-
-    info = msg[keys.camera_info(BASE, "front"), "foxglove.CameraCalibration"]
+    info = msg[keys.camera_info(BASE, "front")]
     assert info["K"] == [2.0, 0, 1.5, 0, 2.5, 1.0, 0, 0, 1] and len(info["P"]) == 12
 
-    scan = msg[keys.scan(BASE), "foxglove.LaserScan"]
+    scan = msg[keys.scan(BASE)]
     assert (scan["start_angle"], scan["end_angle"]) == (-1.0, 1.0)
     assert scan["ranges"] == [1.0, 6.0, 2.0, 6.0, 3.0]          # no return: beyond range_max
 
-    log = msg["events", "foxglove.Log"]
-    assert (log["level"], log["message"]) == (3, "[estop] Emergency stop engaged.")
+    grid = msg[keys.nav_map(BASE)]
+    assert (grid["frame_id"], grid["column_count"], grid["row_stride"], grid["cell_stride"]) == (
+        "pioneer-sim/map", 3, 3, 1)
+    assert grid["cell_size"] == {"x": 0.05, "y": 0.05}
+    assert grid["pose"]["position"] == {"x": -1.0, "y": 2.0, "z": 0}
+    assert [(f["name"], f["type"]) for f in grid["fields"]] == [("occupancy", 2)]    # int8
+    assert np.array_equal(np.frombuffer(grid["data"], np.int8).reshape(2, 3), MAP)    # row 0 at the origin
+    assert msg[f"{keys.nav_map(BASE)}/extra"]["name"] == "home"
 
-    sonar = msg[keys.base_sonar(BASE), "asibot.Sonar"]
+    pose = msg[keys.nav_pose(BASE)]
+    assert pose["frame_id"] == "pioneer-sim/map" and pose["pose"]["position"] == {"x": 1.0, "y": 2.0, "z": 0}
+    particles = msg[f"{keys.nav_pose(BASE)}/particles"]["poses"]
+    assert [p["position"]["x"] for p in particles] == pytest.approx([1.0, 1.1])
+    assert msg[f"{keys.nav_pose(BASE)}/extra"]["localised"] is True
+    path = msg[keys.nav_path(BASE)]
+    assert [(p["position"]["x"], p["position"]["y"]) for p in path["poses"]] == [(0, 0), (1.0, 0.5)]
+    assert msg[f"{keys.nav_path(BASE)}/extra"]["goal_id"] == 4
+
+    log = msg["events"]
+    assert (log["level"], log["message"]) == (3, "[estop] Emergency stop engaged.")       # warning
+
+    sonar = msg[keys.base_sonar(BASE)]
     assert sonar["ranges"] == [1.0, None]                       # JSON has no NaN
 
 
-def test_log_time_is_kept_and_publish_time_is_the_message_stamp(tmp_path):
+def test_log_time_is_the_recorded_time_and_the_stamp_the_message_timestamp(tmp_path, protobuf):
     src = tmp_path / "session.mcap"
-    write_recording(src, session()[:1])
+    state = m.ArmState(names=["q1"], positions=[0.1], velocities=[], stamp=T0 - 5_000_000)
+    write_recording(src, [(keys.arm_state(ROBOT), m.encode(state))])
     with open(export_foxglove(src).output, "rb") as f:
-        [(_, _, message)] = list(make_reader(f).iter_messages())
-    assert (message.log_time, message.publish_time) == (T0, T0)
+        exported = {c.topic: (s, msg) for s, c, msg in make_reader(f).iter_messages()}
+    schema, message = exported[keys.arm_state(ROBOT)]
+    assert message.log_time == message.publish_time == T0     # when the recorder received it
+    stamp = protobuf(schema.data).decode(schema.name, message.data)["timestamp"]
+    assert stamp["seconds"] * 10**9 + stamp["nanos"] == T0 - 5_000_000
+
+
+def test_a_topic_keeps_the_type_of_its_first_message(tmp_path):
+    """A channel has one schema: another type's messages on its key are counted, not written."""
+    src = tmp_path / "session.mcap"
+    key = keys.base_battery(BASE)
+    write_recording(src, [(key, m.encode(m.Battery(volts=12.5))), (key, m.encode(m.Sonar(ranges=[], angles=[]))),
+                          (key, m.encode(m.Battery(volts=12.4)))])
+    summary = export_foxglove(src)
+    assert (summary.messages, summary.skipped, summary.schemas) == (2, 1, {key: "asibot.Battery"})
 
 
 def test_a_bad_message_is_skipped_and_the_rest_exported(tmp_path):
@@ -195,18 +241,18 @@ def test_a_bad_message_is_skipped_and_the_rest_exported(tmp_path):
     bad = m.pack({"_type": "ArmState", "names": ["q1"], "positions": "oops", "velocities": [], "stamp": T0})
     write_recording(src, [(keys.arm_state(ROBOT), bad), (keys.arm_state(ROBOT), b"\xc1 not msgpack")] + session())
     summary = export_foxglove(src)
-    assert summary.skipped == 2 and summary.messages == 13
+    assert summary.skipped == 2 and summary.messages == MESSAGES
 
 
-def test_a_recording_whose_writer_was_killed_exports_up_to_its_last_chunk(tmp_path):
+def test_a_recording_whose_writer_was_killed_exports_up_to_its_last_chunk(tmp_path, protobuf):
     src = tmp_path / "crashed.mcap"
     write_recording(src, session() * 3, finish=False)
     data = src.read_bytes()
     src.write_bytes(data[: len(data) // 2])           # killed while writing a chunk
     summary = export_foxglove(src)
     assert not summary.complete
-    assert 0 < summary.messages < 3 * 13
-    assert len(read_export(summary.output)) == summary.messages
+    assert 0 < summary.messages < 3 * MESSAGES
+    assert len(read_export(summary.output, protobuf)) == summary.messages
 
 
 def test_bad_input_changes_nothing(tmp_path, monkeypatch):
@@ -237,8 +283,8 @@ def test_the_command_line(tmp_path, capsys):
     write_recording(src, session())
     assert asibot(["export", str(src), "--foxglove", "-v"]) == 0
     out = capsys.readouterr().out
-    assert f"wrote 13 messages on 12 topics to {tmp_path / 'foxglove' / 'session.mcap'}" in out
-    assert "foxglove.RawImage" in out
+    assert f"wrote {MESSAGES} messages on {len(SCHEMAS)} topics to {tmp_path / 'foxglove' / 'session.mcap'}" in out
+    assert "foxglove.RawImage" in out and "asibot.Sonar" in out
     assert asibot(["export", str(tmp_path / "missing.mcap")]) == 1
     assert "no such recording" in capsys.readouterr().err
     (tmp_path / "a-file").write_text("")

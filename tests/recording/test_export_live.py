@@ -8,12 +8,12 @@ test, so what was written before and after the export began is known exactly.
 
 from __future__ import annotations
 
-import json
 import signal
 import subprocess
 import sys
 import threading
 from pathlib import Path
+from typing import Callable
 
 import pytest
 from mcap.reader import make_reader
@@ -128,13 +128,18 @@ class Export:
         return self.result
 
 
-def positions(path: Path) -> list[float]:
-    with open(path, "rb") as f:
-        return [json.loads(msg.data)["joints"][0]["position"]
-                for _s, ch, msg in make_reader(f).iter_messages() if ch.topic == KEY]
+@pytest.fixture
+def positions(protobuf) -> Callable[[Path], list[float]]:
+    """`positions(path)`: the position of every arm state exported to `path`, decoded from its
+    protobuf as Foxglove decodes it."""
+    def read(path: Path) -> list[float]:
+        with open(path, "rb") as f:
+            return [protobuf(schema.data).decode(schema.name, msg.data)["joints"][0]["position"]
+                    for schema, ch, msg in make_reader(f).iter_messages() if ch.topic == KEY]
+    return read
 
 
-def test_export_of_a_live_recording_stops_at_what_it_held_when_it_began(writer, monkeypatch):
+def test_export_of_a_live_recording_stops_at_what_it_held_when_it_began(writer, monkeypatch, positions):
     w = writer(batches=4, end="hold")
     started, go_on = threading.Event(), threading.Event()
     real = export.convert
@@ -153,12 +158,12 @@ def test_export_of_a_live_recording_stops_at_what_it_held_when_it_began(writer, 
     summary = run.wait()
     assert w.proc.poll() is None and being_written(w.path)   # the writer is still at it
     assert summary.live and not summary.complete and not summary.stopped
-    assert summary.messages == BATCH                               # only the first batch
+    assert summary.messages == 2 * BATCH      # only the first batch: each state, and its mode on /extra
     assert positions(run.output) == first(BATCH)
     assert w.written == 4 * BATCH
 
 
-def test_follow_goes_on_until_the_writer_closes_the_file(writer, converted):
+def test_follow_goes_on_until_the_writer_closes_the_file(writer, converted, positions):
     w = writer(batches=5, end="close")
     run = Export(w.path, follow=True)
     wait_until(lambda: len(converted) == BATCH, 30, message="the export did not read the first batch")
@@ -173,7 +178,7 @@ def test_follow_goes_on_until_the_writer_closes_the_file(writer, converted):
     assert positions(run.output) == first(5 * BATCH)
 
 
-def test_follow_ends_with_what_was_on_disk_when_the_writer_is_killed(writer, converted):
+def test_follow_ends_with_what_was_on_disk_when_the_writer_is_killed(writer, converted, positions):
     w = writer(batches=3, end="hold")
     run = Export(w.path, follow=True)
     w.next_batch()
@@ -185,7 +190,7 @@ def test_follow_ends_with_what_was_on_disk_when_the_writer_is_killed(writer, con
     assert positions(run.output) == first(3 * BATCH)
 
 
-def test_follow_stops_when_asked_and_keeps_what_it_exported(writer, converted):
+def test_follow_stops_when_asked_and_keeps_what_it_exported(writer, converted, positions):
     w = writer(batches=2, end="hold")
     stop = threading.Event()
     run = Export(w.path, follow=True, stop=stop)
@@ -206,13 +211,13 @@ def test_the_command_says_a_live_recording_was_exported_up_to_its_start(tmp_path
         rec.flush()
         assert asibot(["export", str(source), "-o", str(tmp_path / "out.mcap")]) == 0
         out = capsys.readouterr().out
-        assert "wrote 10 messages" in out
+        assert "wrote 20 messages on 2 topics" in out     # each state, and its mode on /extra
         assert "still being written" in out and "--follow" in out
     finally:
         rec.close()
 
 
-def test_the_command_follows_until_ctrl_c(tmp_path, writer):
+def test_the_command_follows_until_ctrl_c(tmp_path, writer, positions):
     w = writer(batches=2, end="hold")
     out = tmp_path / "out.mcap"
     cli = subprocess.Popen([sys.executable, "-m", "asibot.cli.main", "export", str(w.path), "--follow", "-o", str(out)],

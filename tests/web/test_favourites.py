@@ -64,6 +64,21 @@ def test_a_trip_to_a_place_counts_once_however_it_was_sent(tmp_path):
     assert fav.read().uses == {place_key("pioneer-sim", "fridge"): 2, place_key("pioneer-sim", "sofa"): 1}
 
 
+def test_a_web_restarted_during_a_trip_does_not_count_it_again(tmp_path):
+    from asibot import keys
+    from asibot.messages import NavStatus
+    from asibot.web.trips import TripCounter
+    fav = Favourites(Folder(tmp_path))
+    key = keys.nav_status("pioneer-sim")
+    TripCounter(fav.used).on_status(key, NavStatus(goal_id=0, state="idle", text=""))
+    for counter in (TripCounter(fav.used), TripCounter(fav.used)):     # before and after the restart
+        for _ in range(3):
+            counter.on_status(key, NavStatus(goal_id=4, state="active", text="", place="fridge"))
+    assert fav.read().uses == {}
+    counter.on_status(key, NavStatus(goal_id=5, state="active", text="", place="sofa"))
+    assert fav.read().uses == {place_key("pioneer-sim", "sofa"): 1}
+
+
 def test_uses_and_the_order_are_kept_and_a_hand_edited_file_keeps_what_makes_sense(tmp_path):
     folder = Folder(tmp_path)
     fav = Favourites(folder)

@@ -16,7 +16,7 @@ tells the server who is calling, and these checks read it:
 
 Programs that are not browsers send none of the browser's headers; they are held by the
 servers' own tokens. Plain functions and one class, so the web (ASGI) and the AsTeRICS
-bridge (its own HTTP parser) apply the same rules.
+bridge (a Starlette app) apply the same rules.
 """
 
 from __future__ import annotations

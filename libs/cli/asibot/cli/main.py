@@ -1,4 +1,4 @@
-"""The `asibot` command: up, status, router, estop, release, reset-fault, replay, export, recordings."""
+"""The `asibot` command: up, status, router, estop, release, reset-fault, replay, export, foxglove, recordings."""
 
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ from typing import Any, Callable
 
 from asibot import access, keys
 from asibot.safety import estop
+from asibot.cli import foxglove as foxglovecli
 from asibot.cli import nav as navcli
 from asibot.bus import DEFAULT_ROUTER, ROUTER_ENV, Bus, open_router, router_endpoint
 from asibot.client import DriverClient, SimClient
@@ -68,6 +69,15 @@ class Stop(threading.Event):
 
     def exit_code(self) -> int:
         return INTERRUPTED if self.signum == signal.SIGINT else 0
+
+
+def _connect(name: str, wait: float) -> Bus | None:
+    """The bus for a command that reads it, or None after saying why (no router, a refused login)."""
+    try:
+        return Bus(name, wait=wait)
+    except AsibotError as exc:
+        print(exc, file=sys.stderr)
+        return None
 
 
 def _stop_on_signals() -> Stop:
@@ -249,10 +259,8 @@ def _print_status(rows: list[dict]) -> None:
 
 
 def cmd_status(args: argparse.Namespace) -> int:
-    try:
-        bus = Bus("status", wait=args.wait)
-    except AsibotError as exc:
-        print(exc, file=sys.stderr)
+    bus = _connect("status", args.wait)
+    if bus is None:
         return 1
     with bus:
         health = _health_reports(bus) if args.health or args.json else {}
@@ -412,10 +420,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
             return 2
     speed = None if args.fast else args.speed
     stop = _stop_on_signals()
-    try:
-        bus = Bus("replay", wait=args.wait)
-    except AsibotError as exc:
-        print(exc, file=sys.stderr)
+    bus = _connect("replay", args.wait)
+    if bus is None:
         return 1
     with bus:
         # Ask before watching: zenoh 1.x may answer a liveliness query made just after a
@@ -539,15 +545,16 @@ def build_parser() -> argparse.ArgumentParser:
                       help="replay commands into live robots too (they will move as recorded)")
     rp.set_defaults(func=cmd_replay)
 
-    ex = sub.add_parser("export", help="convert a recording for Foxglove (JSON, foxglove.* schemas)")
+    ex = sub.add_parser("export", help="convert a recording for Foxglove (its schemas, binary images)")
     ex.add_argument("file")
     ex.add_argument("--foxglove", action="store_true", default=True,
-                    help="Foxglove's JSON schemas (the only format, and the default)")
+                    help="Foxglove's well-known schemas, JSON for the rest (the only format, and the default)")
     ex.add_argument("-o", "--output", help="output file (default: foxglove/<name>.mcap beside the recording)")
     ex.add_argument("--follow", action="store_true",
                     help="of a recording being written: go on until it ends (or Ctrl-C), not stop at what it held")
     ex.add_argument("-v", "--verbose", action="store_true", help="list topics and their schemas")
     ex.set_defaults(func=cmd_export)
+    foxglovecli.add_parser(sub)
 
     es = sub.add_parser("estop", help="emergency stop: stop robots now and refuse motion until released")
     es.add_argument("robots", nargs="*", help="robot ids (default: every live robot)")

@@ -144,6 +144,14 @@ def parse(text: object) -> Command:
     raise NotUnderstood(_unknown(raw, low))
 
 
+def is_stop(text: str) -> bool:
+    """Whether `text` is a stop (any spelling): the entries obey it first, and without a token."""
+    try:
+        return parse(text).word == "stop"
+    except NotUnderstood:
+        return False
+
+
 def _unknown(raw: str, low: str) -> str:
     shown = raw if len(raw) <= 40 else raw[:40] + "..."
     close = difflib.get_close_matches(low, sorted(_FIXED | set(ALIASES)), n=1, cutoff=0.6)

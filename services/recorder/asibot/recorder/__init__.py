@@ -11,14 +11,20 @@
 - `index`: a file's contents from its summary or its chunk and message indexes.
 - `live`: the writer's lock, and reading a file that is still being written.
 - `replay`: `replay.replay(path, put, speed=...)` republishes a recording.
-- `export`: `export_foxglove(path)` rewrites a recording as JSON with Foxglove's schemas.
+- `export`: `export_foxglove(path)` rewrites a recording for Foxglove (foxglove-sdk: its
+  well-known schemas, images binary; JSON with our schema for the rest).
+- `live_view`: `LiveView(bus)` serves the running stack on a Foxglove WebSocket server.
+- `conversions` (one function per message type), `jsonable`, `frames`, `channels`: what the
+  export and the live view share, so a session looks the same recorded or live.
 """
 
 from __future__ import annotations
 
 # `replay` stays the module: binding its function here would hide the module behind it.
-from asibot.recorder import export, index, live, reader, recorder, replay, rotation, thinning, writer
+from asibot.recorder import (channels, conversions, export, frames, index, jsonable, live, live_view, reader,
+                             recorder, replay, rotation, thinning, writer)
 from asibot.recorder.export import ExportSummary, export_foxglove
+from asibot.recorder.live_view import LiveView
 from asibot.recorder.reader import (NotARecording, Reading, Record, Summary, check_recording,
                                      iter_messages, list_recordings, summarize)
 from asibot.recorder.recorder import McapRecorder, RecorderService, Session
@@ -27,8 +33,9 @@ from asibot.recorder.thinning import CameraThinner
 from asibot.recorder.writer import LeanWriter
 
 __all__ = [
-    "export", "index", "live", "reader", "recorder", "replay", "rotation", "thinning", "writer",
-    "ExportSummary", "export_foxglove",
+    "channels", "conversions", "export", "frames", "index", "jsonable", "live", "live_view", "reader",
+    "recorder", "replay", "rotation", "thinning", "writer",
+    "ExportSummary", "export_foxglove", "LiveView",
     "NotARecording", "Reading", "Record", "Summary", "check_recording", "iter_messages",
     "list_recordings", "summarize",
     "McapRecorder", "RecorderService", "Session", "Retention", "prune", "CameraThinner", "LeanWriter",

@@ -107,9 +107,13 @@ class Fleet:
     something about a robot changed; the caller decides how often to push it to the page."""
 
     def __init__(self, bus: Bus, on_change: Callable[[str], None] = lambda robot_id: None,
-                 clock: Callable[[], float] = time.time) -> None:
+                 clock: Callable[[], float] = time.time,
+                 on_nav_status: Callable[[str, NavStatus], None] = lambda key, status: None) -> None:
+        """`on_nav_status(key, status)` also hears each nav status (the trips counter), so the web
+        subscribes to it once."""
         self.bus = bus
         self.on_change = on_change
+        self.on_nav_status = on_nav_status
         self.clock = clock
         self._lock = threading.Lock()
         self._robots: dict[str, RobotView] = {}
@@ -122,16 +126,17 @@ class Fleet:
         self._follow(keys.gripper_state, GripperState, "gripper")
         self._follow(keys.base_odom, Odometry, "odom")
         self._follow(keys.nav_pose, NavPose, "nav_pose")
-        self._follow(keys.nav_status, NavStatus, "nav_status")
+        self._follow(keys.nav_status, NavStatus, "nav_status", also=lambda key, msg: self.on_nav_status(key, msg))
         self._follow(keys.nav_path, NavPath, "nav_path")
         self._follow(keys.scan, LaserScan, "scan")
         bus.subscribe(keys.every_robot(keys.nav_map), NavMap, self._on("nav_map"), with_key=True, latest=True)
         bus.subscribe(keys.every_robot(keys.estop), EStop, self._on("estop"), with_key=True, latest=True)
         bus.subscribe(keys.every_robot(keys.events), Event, self._on_event, with_key=True, maxsize=200)
 
-    def _follow(self, key_of_robot: Callable[[str], str], msg_type: type, attr: str) -> None:
+    def _follow(self, key_of_robot: Callable[[str], str], msg_type: type, attr: str,
+                also: Callable[[str, Any], None] | None = None) -> None:
         # A ring of one: the page needs the newest state, never a backlog of old ones.
-        self.bus.subscribe(keys.every_robot(key_of_robot), msg_type, self._on(attr),
+        self.bus.subscribe(keys.every_robot(key_of_robot), msg_type, self._on(attr, also),
                            with_key=True, maxsize=1)
 
     def _view(self, robot_id: str) -> RobotView:
@@ -148,13 +153,15 @@ class Fleet:
             setattr(self._view(robot_id), what, alive)
         self.on_change(robot_id)
 
-    def _on(self, attr: str) -> Callable[[str, Any], None]:
+    def _on(self, attr: str, also: Callable[[str, Any], None] | None = None) -> Callable[[str, Any], None]:
         def store(key: str, msg: Any) -> None:
             robot_id = keys.robot_of(key)
             if robot_id is None:
                 return
             with self._lock:
                 setattr(self._view(robot_id), attr, msg)
+            if also is not None:
+                also(key, msg)
             self.on_change(robot_id)
         return store
 

@@ -17,9 +17,8 @@ from typing import Iterator
 
 import uvicorn
 
-from asibot import keys, local_http, runtime
+from asibot import local_http, runtime
 from asibot.bus import Bus
-from asibot.messages import NavStatus
 from asibot.web import guard, lan as lan_access
 from asibot.web.app import Web, create_app, stop_quietly
 from asibot.web.cameras import Cameras
@@ -70,7 +69,8 @@ class WebService(runtime.Service):
         self.host, self.port = host, port
         self.scheme = "https" if lan else "http"
         live = Live(lambda robot: self.fleet.view(robot), lambda: self.fleet.views())
-        self.fleet = Fleet(bus, on_change=live.changed)
+        trips = TripCounter(data.favourites.used)
+        self.fleet = Fleet(bus, on_change=live.changed, on_nav_status=trips.on_status)
         motion = Motion(bus)
         runner = ProgramRunner(
             env={"ASIBOT_ROUTER": bus.endpoint},
@@ -81,8 +81,6 @@ class WebService(runtime.Service):
             on_start=lambda status: live.send({"type": "run", "status": status}),
             stop_robot=lambda robot: stop_quietly(motion, robot, "its program ended"))
         tasks = TaskDesk(bus, data, runner, is_live=lambda robot: robot in self.fleet.ids())
-        trips = TripCounter(data.favourites.used)
-        bus.subscribe(keys.every_robot(keys.nav_status), NavStatus, trips.on_status, with_key=True)
         names = [host, *local_http.names_from_env(HOSTS_ENV)]
         if lan:
             names += [*lan_access.lan_addresses(), socket.gethostname(), f"{socket.gethostname()}.local"]

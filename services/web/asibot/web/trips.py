@@ -1,7 +1,11 @@
 """A trip to one of the person's places counts as a use of it, however it was sent: the page,
 the voice, the AsTeRICS bridge, a program or the command line all reach nav, and nav says on
 the bus which place its new goal is (NavStatus.place). Counted here, once per goal, so Home
-offers the places this person goes to whoever asked for the trip."""
+offers the places this person goes to whoever asked for the trip.
+
+The first status of a robot after the web starts is where counting begins, not a trip: a web
+restarted by the launcher while the robot drives to the fridge sees that goal again, and it
+was counted before the restart."""
 
 from __future__ import annotations
 
@@ -28,7 +32,7 @@ class TripCounter:
             return
         with self._lock:
             # != and not >: a restarted nav numbers its goals from 1 again.
-            new = status.goal_id != self._goal.get(robot)
+            new = robot in self._goal and status.goal_id != self._goal[robot]
             self._goal[robot] = status.goal_id
         if new and status.place and status.state == "active":
             self.used(place_key(robot, status.place))

@@ -1,19 +1,20 @@
-"""A 2D occupancy grid for the emulator's sonar and bumpers: ROS map_server PGM+YAML, or a room.
+"""A 2D occupancy grid for the emulator's sonar and bumpers: a ROS map_server map, or a room.
 
-map_server convention (docs/maps.md): `image` (PGM), `resolution` m/cell, `origin` [x, y, yaw]
-of the lower-left pixel, `negate`, `occupied_thresh`; occupancy p = (255 - v) / 255 (or
-v / 255 when negated) and a cell is an obstacle when p > occupied_thresh. Row 0 is the top
-(max y).
+Maps are read by asibot.rosmap (docs/maps.md), as navigation reads them, so the emulated world
+and navigation's map agree cell for cell: a cell is an obstacle when map_server marks it
+occupied (100). A hand-written world may leave out negate and the thresholds (map_saver's are
+used), which map_server itself would refuse.
 """
 
 from __future__ import annotations
-from importlib import resources
 
 import math
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
-import yaml
+
+from asibot.rosmap import read_map
 
 
 class GridMap:
@@ -95,56 +96,12 @@ def resolve(name: str | Path) -> Path:
     return shipped
 
 
+#: What a hand-written world may leave out of its YAML: map_saver's values.
+LAX_DEFAULTS = {"negate": 0, "occupied_thresh": 0.65, "free_thresh": 0.196}
+
+
 def load(yaml_path: str | Path) -> GridMap:
-    """Read a map_server YAML and its PGM (or a shipped map by name); errors say which file or
-    field is wrong."""
-    path = resolve(yaml_path)
-    try:
-        meta = yaml.safe_load(path.read_text())
-    except OSError as exc:
-        raise ValueError(f"cannot read the map file {path}: {exc.strerror}") from None
-    if not isinstance(meta, dict):
-        raise ValueError(f"{path} is not a map_server YAML map (expected a mapping)")
-    for field in ("image", "resolution", "origin"):
-        if field not in meta:
-            raise ValueError(f"{path} misses the map_server field {field!r}")
-    image = path.parent / str(meta["image"])
-    pixels = read_pgm(image)
-    p = pixels.astype(float) / 255.0 if meta.get("negate", 0) else (255.0 - pixels) / 255.0
-    occupied = p > float(meta.get("occupied_thresh", 0.65))
-    origin = meta["origin"]
-    return GridMap(np.flipud(occupied), float(meta["resolution"]), (float(origin[0]), float(origin[1])))
-
-
-def read_pgm(path: Path) -> np.ndarray:
-    """Binary (P5) or ASCII (P2) 8-bit PGM as a uint8 array, row 0 at the top."""
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise ValueError(f"cannot read the map image {path}: {exc.strerror}") from None
-    tokens: list[bytes] = []
-    pos = 0
-    while len(tokens) < 4:
-        while pos < len(data) and data[pos:pos + 1].isspace():
-            pos += 1
-        if data[pos:pos + 1] == b"#":
-            pos = data.index(b"\n", pos) + 1
-            continue
-        start = pos
-        while pos < len(data) and not data[pos:pos + 1].isspace():
-            pos += 1
-        if start == pos:
-            raise ValueError(f"{path} is not a PGM image (truncated header)")
-        tokens.append(data[start:pos])
-    magic, w, h, maxval = tokens[0], int(tokens[1]), int(tokens[2]), int(tokens[3])
-    if maxval > 255:
-        raise ValueError(f"{path}: only 8-bit PGM maps are supported (maxval {maxval})")
-    if magic == b"P5":
-        raw = np.frombuffer(data, dtype=np.uint8, count=w * h, offset=pos + 1)
-    elif magic == b"P2":
-        raw = np.array(data[pos:].split()[: w * h], dtype=np.uint8)
-    else:
-        raise ValueError(f"{path} is not a PGM image (magic {magic!r}; expected P5 or P2)")
-    if raw.size != w * h:
-        raise ValueError(f"{path} holds {raw.size} pixels, its header says {w}x{h}")
-    return raw.reshape(h, w)
+    """A map_server map (or a shipped map by name) as obstacles; a ValueError (asibot.rosmap's
+    MapFileError) says which file or key is wrong."""
+    m = read_map(resolve(yaml_path), defaults=LAX_DEFAULTS)
+    return GridMap(m.values == 100, m.settings.resolution, m.settings.origin[:2])

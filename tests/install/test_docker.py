@@ -1,0 +1,171 @@
+"""The image builds from a clean copy of the repository and `docker compose` runs the sim
+profile with it, as an installer would: every service shows in `asibot status` from the host,
+the simulated arm moves, the page loads; then it all comes down.
+
+On its own Docker engine (docs/docker.md: vfs storage, no bridge, host networking), from base
+images made on this machine (docker/make-local-bases). Needs root; CI runs as root."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+import yaml
+
+from asibot.cli import compose
+from asibot.testing import free_port, wait_until
+
+ROOT = Path(__file__).resolve().parents[2]
+PROJECT = "asibot-test"
+IMAGE = "asibot:test"
+#: The machine's download proxy's certificate authority, for pip and npm inside the build.
+MACHINE_CA = Path("/etc/ssl/certs/ca-certificates.crt")
+
+# Building the image is minutes of downloads and vfs copies (docs/docker.md has the figures).
+pytestmark = [pytest.mark.slow, pytest.mark.docker, pytest.mark.timeout(2400)]
+
+
+def run(argv: list[str], env: dict[str, str], timeout: float, **kw) -> subprocess.CompletedProcess:
+    done = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=timeout, **kw)
+    assert done.returncode == 0, f"{' '.join(argv)} failed ({done.returncode}):\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}"
+    return done
+
+
+@pytest.fixture(scope="module")
+def engine(tmp_path_factory: pytest.TempPathFactory):
+    """A Docker engine of the test's own, with the recipe of docs/docker.md; its environment."""
+    if os.geteuid() != 0:
+        pytest.skip("the image test runs its own Docker engine, which needs root (CI runs as root)")
+    assert shutil.which("dockerd"), "the image test needs Docker's engine: ./bootstrap installs docker.io as root"
+    folder = Path(tmp_path_factory.mktemp("docker", numbered=True))
+    sock = folder / "docker.sock"
+    log = open(folder / "dockerd.log", "w")
+    daemon = subprocess.Popen(
+        ["dockerd", "--storage-driver=vfs", "--iptables=false", "--ip6tables=false", "--bridge=none",
+         "--data-root", str(folder / "root"), "--exec-root", str(folder / "exec"),
+         "--pidfile", str(folder / "docker.pid"), "-H", f"unix://{sock}"],
+        stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    env = {**os.environ, "DOCKER_HOST": f"unix://{sock}"}
+    try:
+        wait_until(lambda: subprocess.run(["docker", "info"], env=env, capture_output=True).returncode == 0,
+                   60, interval=0.5, message=lambda: (folder / "dockerd.log").read_text()[-2000:])
+        yield env
+    finally:
+        daemon.send_signal(signal.SIGTERM)
+        try:
+            daemon.wait(60)
+        except subprocess.TimeoutExpired:
+            daemon.kill()
+        log.close()
+        # The engine leaves its network namespace mounted; then the folder goes (vfs: gigabytes).
+        for mount in reversed(Path("/proc/mounts").read_text().splitlines()):
+            if mount.split()[1].startswith(str(folder)):
+                subprocess.run(["umount", "-l", mount.split()[1]], capture_output=True)
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+@pytest.fixture(scope="module")
+def image(engine: dict[str, str], tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
+    """The image, built from what git tracks (a clean checkout), and the figures of its build."""
+    context = Path(tmp_path_factory.mktemp("context"))
+    files = run(["git", "ls-files", "-co", "--exclude-standard"], os.environ, 60, cwd=ROOT).stdout.splitlines()
+    for name in files:
+        if (ROOT / name).is_file():
+            (context / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(ROOT / name, context / name)
+    if MACHINE_CA.exists():
+        shutil.copy(MACHINE_CA, context / "docker" / "extra-ca.crt")
+    started = time.monotonic()
+    run([str(ROOT / "docker" / "make-local-bases")], engine, 900)
+    bases = time.monotonic() - started
+    run(["docker", "build", "--network", "host", "-q", "--build-arg", "BASE=local/debian:bookworm",
+         "--build-arg", "NODE=local/node:host", "-t", IMAGE, str(context)], engine, 1800)
+    built = time.monotonic() - started - bases
+    size = int(run(["docker", "image", "inspect", "-f", "{{.Size}}", IMAGE], engine, 60).stdout)
+    print(f"\nimage {IMAGE}: {size / 1e6:.0f} MB; base images {bases:.0f} s, build {built:.0f} s")
+    return {"size": str(size)}
+
+
+def host_network(document: dict, ports: dict[str, int]) -> dict:
+    """compose.yaml as it is but for the network: every service on the host's network, bound to
+    127.0.0.1 on the test's own ports (the engine here has no bridge: docs/docker.md). A whole
+    file, not an override: Compose adds an override's ports to the original's, and host
+    networking refuses published ports."""
+    router = f"tcp/127.0.0.1:{ports['router']}"
+    ours = {"ASIBOT_ROUTER": router, "ASIBOT_WEB_HOST": "127.0.0.1", "ASIBOT_WEB_PORT": str(ports["web"]),
+            "ASIBOT_ASTERICS_PORT": str(ports["asterics"]), "ASIBOT_ASTERICS_HTTP_PORT": str(ports["asterics_http"])}
+    services = {}
+    for name, body in document["services"].items():
+        body = {k: v for k, v in body.items() if k not in ("ports", "build", "network_mode")}
+        body["environment"] = {**body.get("environment", {}), **ours,
+                               **({"ASIBOT_ROUTER_LISTEN": router} if name == "router" else {})}
+        services[name] = {**body, "image": IMAGE, "network_mode": "host"}
+    return {**document, "services": services}
+
+
+def test_the_image_runs_the_sim_profile_with_compose(image: dict[str, str], engine: dict[str, str], tmp_path: Path) -> None:
+    ports = {"router": free_port(), "web": free_port(), "asterics": free_port(), "asterics_http": free_port()}
+    document = yaml.safe_load((ROOT / "compose.yaml").read_text())
+    (tmp_path / "compose.yaml").write_text(yaml.safe_dump(host_network(document, ports)))
+    recordings, data = tmp_path / "recordings", tmp_path / "data"
+    for folder in (recordings, data):
+        folder.mkdir()
+        os.chown(folder, 1000, 1000)            # the image's user, asibot
+    env = {**engine, "ASIBOT_RECORDINGS": str(recordings), "ASIBOT_DATA_VOLUME": str(data),
+           "COMPOSE_PROJECT_NAME": PROJECT}
+    up = ["docker-compose", "-f", str(tmp_path / "compose.yaml"), "--profile", "sim"]
+    host = {**os.environ, "ASIBOT_ROUTER": f"tcp/127.0.0.1:{ports['router']}"}
+    try:
+        run([*up, "up", "-d", "--no-build"], env, 600)
+        # Each service of the profile as `asibot status` names it: its program and its robot.
+        wanted = {(spec.command[2].removeprefix("asibot."), spec.command[spec.command.index("--robot") + 1]
+                   if "--robot" in spec.command else None)
+                  for spec in compose.select(compose.load(ROOT / "compose.yaml"), "sim") if spec.name != "router"}
+
+        def missing() -> set | None:
+            done = subprocess.run([sys.executable, "-m", "asibot.cli.main", "status", "--json"], env=host,
+                                  capture_output=True, text=True, timeout=30)
+            if done.returncode != 0:
+                return None
+            seen = {(s["service"], s["instance"]) for s in json.loads(done.stdout)["services"]}
+            return {(name, robot) for name, robot in wanted
+                    if not any(n == name and (robot is None or i == robot) for n, i in seen)}
+        wait_until(lambda: missing() == set(), 240, interval=2,
+                   message=lambda: f"not in `asibot status`: {missing()}; {logs(up, env)}")
+
+        moved = run([sys.executable, "-c", MOVE_THE_ARM], host, 120).stdout
+        before, after = json.loads(moved)
+        assert abs(after[0] - before[0] - 10.0) < 0.5, (before, after)
+
+        page = urllib.request.urlopen(f"http://127.0.0.1:{ports['web']}/", timeout=30)
+        assert page.status == 200 and "<title>" in page.read().decode()
+        script = urllib.request.urlopen(f"http://127.0.0.1:{ports['web']}/static/vendor/three.js", timeout=30)
+        assert script.status == 200       # the npm bundle the front-end stage made
+        assert any(recordings.iterdir()), "the recorder wrote nothing"
+    finally:
+        subprocess.run([*up, "down", "--volumes", "--timeout", "20"], env=env, capture_output=True, timeout=300)
+
+
+def logs(up: list[str], env: dict[str, str]) -> str:
+    return subprocess.run([*up, "logs", "--tail", "15", "--no-color"], env=env, capture_output=True,
+                          text=True, timeout=60).stdout[-6000:]
+
+
+#: From the host: turn the simulated arm's first joint by 10 degrees, print the joints before and after.
+MOVE_THE_ARM = """
+import json
+from asibot.client import CartesianClient
+arm = CartesianClient("asibot-sim", timeout=30)
+before = arm.state()["joints"]
+arm.relj([10, 0, 0, 0, 0], speed=0.5)
+arm.wait(timeout=60)
+print(json.dumps([before, arm.state()["joints"]]))
+"""
