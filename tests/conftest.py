@@ -1,11 +1,20 @@
 """Shared fixtures: every multi-process test gets its own real Zenoh router on loopback;
 service unit tests get an in-memory bus. `pytest --cpu-burners 2` runs the suite with both
-cores of a 2-core machine kept busy, as a loaded CI machine would be."""
+cores of a 2-core machine kept busy, as a loaded CI machine would be.
 
+The suite runs on two pytest-xdist workers (pyproject.toml's addopts). Every test of a module
+with a real-time test (marked `slow`: a simulated robot moving, a browser) runs on one worker,
+one after the other, as they always ran; the image test on its own (it mostly waits on
+downloads and disk); the rest, unit tests, spread over both. `-n 0` runs all in one
+process."""
+
+import fcntl
 import os
 import signal
 import subprocess
 import sys
+import tempfile
+from pathlib import Path
 
 import pytest
 
@@ -42,6 +51,46 @@ def user_data(tmp_path_factory):
         os.environ["ASIBOT_DATA"] = old
 
 
+def pytest_collection_modifyitems(config, items):
+    """The xdist groups (see the module's docstring): by module, so a module's fixtures start once."""
+    realtime = {item.module.__name__ for item in items if item.get_closest_marker("slow")}
+    for item in items:
+        if item.get_closest_marker("docker"):
+            item.add_marker(pytest.mark.xdist_group("docker"))
+        elif item.module.__name__ in realtime:
+            item.add_marker(pytest.mark.xdist_group("realtime"))
+
+
+def _quiet_lock(config) -> Path:
+    """One file per run, shared by its workers: `quiet` below."""
+    run = getattr(config, "workerinput", {}).get("testrunuid", f"solo-{os.getpid()}")
+    return Path(tempfile.gettempdir()) / f"asibot-quiet-{run}.lock"
+
+
+@pytest.fixture(autouse=True)
+def _share_the_cores(request):
+    """Every test holds the run's lock shared, so a `quiet` test can have the cores alone; not the
+    image test, which is minutes of downloads and disk copies a quiet test need not wait for."""
+    if request.node.get_closest_marker("docker"):
+        yield None
+        return
+    with open(_quiet_lock(request.config), "a") as f:
+        fcntl.flock(f, fcntl.LOCK_SH)
+        yield f
+
+
+@pytest.fixture
+def quiet(_share_the_cores):
+    """The other worker waits (between its tests) while this test runs: for a test whose input
+    the load itself would spoil (see burners_paused)."""
+    # Our shared hold becomes the whole lock once the other worker's test in flight has ended.
+    fcntl.flock(_share_the_cores, fcntl.LOCK_EX)
+    try:
+        yield
+    finally:
+        fcntl.flock(_share_the_cores, fcntl.LOCK_SH)
+
+
 def pytest_addoption(parser):
     parser.addoption("--cpu-burners", type=int, default=int(os.environ.get("ASIBOT_CPU_BURNERS", "0")),
                      help="keep N busy processes running during the tests (stress: a loaded machine)")
@@ -59,7 +108,7 @@ def cpu_burners(request):
 
 
 @pytest.fixture
-def burners_paused(cpu_burners):
+def burners_paused(cpu_burners, quiet):
     """The burners stopped for one test whose input the load itself would spoil, not our code.
 
     Chromium's fake microphone plays its file from an ordinary thread: with both cores busy it

@@ -88,4 +88,4 @@ def test_every_declared_dependency_is_imported(folder: Path) -> None:
 #: Needed at run time without an import statement: a command-line tool (the tests run mypy and
 #: pyflakes, requirements/lock runs uv), a type stub, a plugin pytest loads by itself, what
 #: uvicorn (WebSocket) and FastAPI (forms) load when a route needs it.
-RUNTIME_ONLY = {"pytest-timeout", "types-pyyaml", "mypy", "pyflakes", "uv", "websockets", "python-multipart"}
+RUNTIME_ONLY = {"pytest-timeout", "pytest-xdist", "types-pyyaml", "mypy", "pyflakes", "uv", "websockets", "python-multipart"}

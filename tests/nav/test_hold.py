@@ -97,7 +97,8 @@ def test_while_another_program_holds_the_base_nav_says_so_at_once(memory_bus, ap
     try:
         wait_until(lambda: svc.holder.current == teleop.id, 5)
         with NavClient(ROBOT, timeout=10) as nav:
-            for move in (lambda: nav.primitive("forward"), lambda: nav.goto("fridge"), lambda: nav.turn(90)):
+            for move in (lambda: nav.primitive("forward"), lambda: nav.goto("fridge"), lambda: nav.turn(90),
+                         lambda: bus.call(keys.nav_rpc(ROBOT, "localize"), {}, timeout=5)):   # it turns in place
                 with pytest.raises(RpcError, match=f"Another program drives the base of {ROBOT} \\({identity.short(teleop.id)}\\)") as err:
                     move()
                 assert err.value.code == "busy"
@@ -105,7 +106,6 @@ def test_while_another_program_holds_the_base_nav_says_so_at_once(memory_bus, ap
             assert not svc.pilot._driving
             nav.primitive("stop")                     # a stop is always taken
             nav.primitive(" Stop ")                   # in any case and spacing
-            bus.call(keys.nav_rpc(ROBOT, "localize"), {}, timeout=5)   # forgetting where it is drives nothing
     finally:
         svc.close()
         driver.close()

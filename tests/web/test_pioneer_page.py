@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 
 import pytest
@@ -51,11 +52,13 @@ def _still(truth: Inbox) -> bool:
     return len(last) == 10 and max(math.hypot(p.x - last[0].x, p.y - last[0].y) for p in last) < 0.003
 
 
-def test_the_base_page_drives_the_pioneer_and_sends_it_where_the_map_is_tapped(browser, apartment):
+@contextlib.contextmanager
+def _base_page(browser, apartment):
+    """A page on the Base tab, once nav is localised, and its status line; it must raise no
+    script error."""
     page = browser.new_page(viewport={"width": 1366, "height": 1000})
     errors: list[str] = []
     page.on("pageerror", lambda e: errors.append(str(e)))
-    truth = _truth(apartment)
     try:
         page.goto(apartment.web_url + "#base")
         page.wait_for_selector("body[data-ready=true]")
@@ -63,6 +66,15 @@ def test_the_base_page_drives_the_pioneer_and_sends_it_where_the_map_is_tapped(b
         status = page.locator(".nav-status")
         wait_until(lambda: "not sure" not in status.inner_text() and "Waiting" not in status.inner_text(),
                    timeout=30, message="nav never localised")
+        yield page, status
+    finally:
+        page.close()
+    assert not errors, errors
+
+
+def test_the_base_page_drives_the_pioneer_and_sends_it_where_the_map_is_tapped(browser, apartment):
+    truth = _truth(apartment)
+    with _base_page(browser, apartment) as (page, status):
         page.locator(".points li[data-place=fridge]").wait_for(timeout=10000)   # the places are listed
 
         # one step forward (width 3: 1 m), by a big button
@@ -111,9 +123,27 @@ def test_the_base_page_drives_the_pioneer_and_sends_it_where_the_map_is_tapped(b
         wait_until(lambda: len(truth) > 0, timeout=2)
         after = truth.last()
         assert math.hypot(after.x - before.x, after.y - before.y) < 0.01
-    finally:
-        page.close()
-    assert not errors, errors
+
+
+def test_find_where_i_am_turns_the_pioneer_in_place_until_it_knows(browser, apartment):
+    """The Base page's "Find where I am": nav looks everywhere on the map and turns the robot in
+    place with the sim's real camera and sonar scan, then says it knows where it is, and is right."""
+    truth = _truth(apartment)
+    with _base_page(browser, apartment) as (page, status):
+        wait_until(lambda: _still(truth), timeout=10, interval=0.1)
+        start = truth.last()
+        page.get_by_role("button", name="Find where I am").click()
+        page.get_by_text("Turning in place to find where I am.").wait_for(timeout=10000)
+        found = page.locator(".events li", has_text="I know where I am again")
+        failed = page.locator(".events li", has_text="I could not find where I am")
+        wait_until(lambda: found.count() or failed.count(), timeout=120, interval=0.5,
+                   message=lambda: f"no end to the search: {status.inner_text()}")
+        assert found.count(), page.locator(".events").inner_text()
+        end = truth.last()
+        assert math.hypot(end.x - start.x, end.y - start.y) < 0.3, "it drove instead of turning in place"
+        nav = apartment_json(apartment, "/api/robots/pioneer-sim")["nav"]["pose"]
+        assert nav["localised"] and math.hypot(nav["x"] - end.x, nav["y"] - end.y) < 0.5, (nav, end)
+        screenshot(page, "base-found")
 
 
 def apartment_json(apartment, path: str) -> dict:

@@ -401,6 +401,11 @@ class NavClient(_Client):
         """Tell localisation where the robot is (x, y, theta in m, m, rad, map frame)."""
         self._call("set_pose", pose=list(pose))
 
+    def localize(self) -> str:
+        """Find where the robot is: it looks everywhere on the map and turns in place (up to
+        twice) until it knows; the status's `localised` and an event say how that went."""
+        return self._call("localize")["text"]
+
     def map_start(self) -> str:
         """Start building a new map where the robot stands; drive it (drive, turn, primitive)
         through every room while it maps. Goals are refused until the map is saved and used."""

@@ -6,6 +6,11 @@ simulator. It knows nothing of Zenoh and takes the time as an argument.
 - Where it is: AMCL on odometry and scans (`Amcl`). The filter updates when a new scan has
   come and the robot moved enough; between updates the pose is carried by odometry. The
   robot counts as localised while the filter's main cluster is tighter than `localised_std`.
+  Odometry that goes back in time or leaps (`odometry_jump`: a base driver or the sim that
+  restarted, the robot carried off) means the robot no longer knows where it is: the filter
+  looks everywhere (so it is not localised, never "localised" metres off), whatever drives
+  ends, and the person is told. `localize` (asked for) then turns in place, up to twice, until
+  the filter has found the robot, and says how that went.
 - Where it goes: goals through the `Navigator` (action semantics: `goto` answers a goal id at
   once, a newer goal preempts, `cancel`, `result`), to a named place (`Places`) or a pose.
 - How a person drives it: the thesis's primitives (`Primitives`), closed-loop on odometry.
@@ -58,6 +63,10 @@ class PilotParams:
     localised_std: float = 0.5        # m and rad: the filter's spread below which it can drive
     particles_shown: int = 300        # particles sent with each pose, for a map view
     odometry_kept: int = 100          # readings kept to place a late scan (5 s at 20 Hz)
+    #: m and rad between two odometry readings past which it is a restart or a leap, not motion
+    #: (the P3-AT covers 0.06 m and 0.15 rad between two 20 Hz readings at full speed)
+    odometry_jump: tuple[float, float] = (0.5, 1.0)
+    finding_turns: int = 2            # full turns in place `localize` makes at most to find the robot
 
 
 @dataclass
@@ -117,6 +126,10 @@ class Pilot:
         self.mapper_params = MapperParams(resolution=grid.info.resolution)
         self.mapper: Mapper | None = None   # the latest map being built (kept after map_stop, to save)
         self.mapping = False
+        #: Why the robot lost track of where it is ("" when it has not, or found itself since).
+        self.lost = ""
+        self._finding = 0                # turns in place left while `localize` looks for the robot
+        self._looking = False            # a turn made to find the robot runs
 
     # ------------------------------------------------------------------------- inputs
 
@@ -124,9 +137,32 @@ class Pilot:
         pose = Pose(msg.x, msg.y, msg.theta)
         if all(math.isfinite(v) for v in (*pose, msg.vx, msg.wz)):
             self._odom = _Reading(pose, msg.vx, msg.wz, now, msg.stamp)
-            if self._history and msg.stamp <= self._history[-1].stamp:
+            last = self._history[-1] if self._history else None
+            if last is not None and msg.stamp <= last.stamp:
                 self._history.clear()       # a restarted base driver, or a clock step
+            if last is not None and (msg.stamp < last.stamp or self._leapt(last.pose, pose)):
+                self._lose_track(now, "the base's odometry started again (its driver or the simulation "
+                                      "restarted, or the robot was carried)")
             self._history.append(self._odom)
+
+    def _leapt(self, before: Pose, after: Pose) -> bool:
+        metres, radians = self.params.odometry_jump
+        return (math.hypot(after.x - before.x, after.y - before.y) > metres
+                or abs(wrap(after.theta - before.theta)) > radians)
+
+    def _lose_track(self, now: float, why: str) -> None:
+        """The robot may be anywhere: look everywhere, end what drives, tell the person."""
+        self.lost = why
+        self._end_everything(now, f"I lost track of where I am: {why}")
+        if self.mapping:
+            self.on_event("warning", "lost", f"I lost track of where I am: {why}. The map being made "
+                                             "no longer fits; stop mapping (map_stop) and start again.")
+            return
+        self.amcl.global_localization()
+        self.amcl.odometry_restarted()
+        self._scan_used = True          # a scan taken before the restart cannot be placed
+        self.on_event("warning", "lost", f"I lost track of where I am: {why}. Ask me to find where I am "
+                                         "(I turn in place), or set my position on the map.")
 
     def scan(self, now: float, msg: m.LaserScan) -> None:
         self._scan = (msg, now)
@@ -153,7 +189,8 @@ class Pilot:
         if self.mapping:
             return True          # the map is drawn around where the mapper says the robot is
         est = self.amcl.estimate
-        return est is not None and est.std_xy < self.params.localised_std and est.std_theta < self.params.localised_std
+        return (est is not None and not self.amcl.searching
+                and est.std_xy < self.params.localised_std and est.std_theta < self.params.localised_std)
 
     def pose(self) -> Pose:
         """The map pose now (the filter's estimate, or the mapper's, carried forward by odometry)."""
@@ -228,8 +265,10 @@ class Pilot:
             raise RpcError("busy", "I am mapping, so there is no map to plan on yet. Drive me with the primitives; "
                                    "save the map (map_save NAME with use) or stop mapping (map_stop) first.")
         if not self.localised:
-            raise RpcError("unavailable", "I am not sure where I am, so I cannot plan a way there. Set my "
-                                          "position on the map (or start localisation) and try again.")
+            why = f" ({self.lost})" if self.lost else ""
+            raise RpcError("unavailable", f"I am not sure where I am{why}, so I cannot plan a way there. Ask me "
+                                          "to find where I am (I turn in place), or set my position on the map, "
+                                          "and try again.")
         if self._fresh_odom(now) is None:
             raise RpcError("unavailable", "No odometry from the base: is the base driver (or the sim) running?")
         before = self.navigator.status
@@ -287,15 +326,45 @@ class Pilot:
         variances = (float(cov[0]), float(cov[1]), float(cov[2])) if cov is not None else None
         self.amcl.set_pose(p, variances)   # raises on a pose off the map, changing nothing
         self._end_everything(now, "my position was set again")
+        self.lost = ""
         self._scan_used = False      # the next scan corrects the new guess at once
         return {"pose": list(p)}
 
     def localize(self, now: float) -> dict:
-        """Forget where the robot is and look everywhere (amcl's global localisation)."""
+        """Forget where the robot is, look everywhere (amcl's global localisation) and turn in
+        place, up to `finding_turns` times, until the filter has found the robot."""
+        self._may_move("finding where I am")
+        odom = self._fresh_odom(now)
+        if odom is None or self._fresh_scan(now) is None:
+            raise RpcError("unavailable", "I cannot look for where I am without odometry and a scan from the "
+                                          "base: are the base driver (or the sim) and perception running?")
         self.amcl.global_localization()
         self._end_everything(now, "localisation started again")
         self._scan_used = False
-        return {"text": "looking for where I am: drive me around a little, or wait"}
+        self._finding = self.params.finding_turns
+        self._turn_to_find(now, odom.pose)
+        return {"text": "looking for where I am: turning in place"}
+
+    def _turn_to_find(self, now: float, odom: Pose) -> None:
+        self._finding -= 1
+        self.primitives.start(now, "turn left", odom, amount=2 * math.pi)
+        self._driving, self._latest, self._looking = True, "drive", True
+
+    def _found(self, now: float, odom: Pose, done: bool) -> bool:
+        """A turn made to find the robot ended: True when another turn starts."""
+        self._looking = False
+        if self.localised:
+            self._finding, self.lost = 0, ""
+            self.on_event("info", "localised", "I know where I am again.")
+            return False
+        if done and self._finding > 0:
+            self._turn_to_find(now, odom)
+            return True
+        self._finding = 0
+        self.on_event("warning", "not_localised", "I could not find where I am"
+                      + (": the turn was stopped" if not done else "")
+                      + ". Set my position on the map, or drive me somewhere I can see more and ask again.")
+        return False
 
     # ------------------------------------------------------------------------ mapping
 
@@ -364,6 +433,7 @@ class Pilot:
         # for goals): silence alone stops the base only at its watchdog, later, and with a
         # warning the user did not cause.
         self._halt = self._halt or self.primitives.active or self._driving
+        self._looking, self._finding = False, 0
         self._end_goal(now, why)
         if self.primitives.active:
             self.primitives.stop(f"stopped: {why}" if why else "stopped")
@@ -407,8 +477,15 @@ class Pilot:
             self._driving = False
             done = motion.done
             self._drive_state = SUCCEEDED if done else ABORTED
-            self.on_event("info" if done else "warning", "drive_done" if done else "drive_stopped", motion.text)
+            if self._looking:
+                if self._found(now, odom.pose, done):
+                    return Command(0.0, 0.0)
+            else:
+                self.on_event("info" if done else "warning", "drive_done" if done else "drive_stopped", motion.text)
             return Command(0.0, 0.0)
+        if self.lost and self.localised:          # found while the person drove it
+            self.lost = ""
+            self.on_event("info", "localised", "I know where I am again.")
         # the costmap takes a scan only where it was taken (a scan that cannot be placed waits)
         placed: m.LaserScan | None = None
         scan_pose: Pose | None = None

@@ -73,7 +73,8 @@ VERBS: dict[str, Verb] = {
                      doc="the primitives' speed or width, one level up or down"),
     "set_pose": Verb({"pose": Field(POSE, required=True), "cov": Field(COVARIANCE)},
                      doc="tell localisation where the robot is; a running goal or drive ends"),
-    "localize": Verb(doc="forget where the robot is and look everywhere; a running goal or drive ends"),
+    "localize": Verb(doc="forget where the robot is, look everywhere and turn in place (up to twice) until "
+                         "found; a running goal or drive ends", needs_driver=True),
     "save_map": Verb({"name": Field(MAP_NAME, default="map", also=PLAIN)},
                      doc="save the map in use as NAME.yaml + NAME.pgm in the user's maps folder"),
     "map_start": Verb(doc="start a new map where the robot stands, to drive it everywhere (goals are refused)"),

@@ -113,6 +113,11 @@ async def cancel(robot: RobotId, request: Request) -> dict:
     return dict(await off_loop(_nav(request, robot).cancel))
 
 
+@router.post("/{robot}/localize", summary="find where the robot is: it turns in place until it knows")
+async def localize(robot: RobotId, request: Request) -> dict:
+    return {"text": await off_loop(_nav(request, robot).localize)}
+
+
 @router.post("/{robot}/drive", summary="one of the driving primitives, or stop")
 async def drive(robot: RobotId, body: Drive, request: Request) -> dict:
     return {"text": await off_loop(_nav(request, robot).primitive, body.name, body.continuous)}

@@ -101,6 +101,7 @@ export const paths = {
     map: (id) => at('base', id, 'map'),
     goto: (id) => at('base', id, 'goto'),
     cancel: (id) => at('base', id, 'cancel'),
+    localize: (id) => at('base', id, 'localize'),
     drive: (id) => at('base', id, 'drive'),
     settings: (id) => at('base', id, 'settings'),
     places: (id) => at('base', id, 'places'),

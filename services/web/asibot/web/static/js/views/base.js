@@ -108,6 +108,9 @@ export default {
       (place) => attemptOn(robot.id, (id) => api.post(paths.base.goto(id), { place: place.name }), `On the way to ${place.name}.`));
       const status = el('p', { class: 'big nav-status', role: 'status', 'aria-live': 'polite' });
       const cancel = el('button', { type: 'button', class: 'danger', onclick: () => attemptOn(robot.id, (id) => api.post(paths.base.cancel(id)), 'Canceled.') }, 'Cancel the trip');
+      // After a restart or being carried, the robot says it lost track of where it is: this
+      // button has it turn in place until it knows again.
+      const find = el('button', { type: 'button', class: 'find-me', onclick: () => attemptOn(robot.id, (id) => api.post(paths.base.localize(id)), 'Turning in place to find where I am.') }, 'Find where I am');
       const events = el('ul', { class: 'events', 'aria-label': 'What the robot said' });
       const drive = drivePanel(robot.id);
       const places = placesPanel(robot.id, (list) => map.update(map.live, list));
@@ -115,7 +118,7 @@ export default {
         el('div', { class: 'columns' },
           el('div', {},
             el('section', { class: 'panel', 'aria-label': 'Map' }, el('h2', {}, 'Map'), el('div', { class: 'map-box' }, map.node),
-              status, el('div', { class: 'row' }, cancel)),
+              status, el('div', { class: 'row' }, cancel, find)),
             el('section', { class: 'panel', 'aria-label': 'Messages' }, el('h2', {}, 'Messages'), events)),
           el('div', {}, drive.panel, places)));
       map.load().catch((e) => notify(e.message));
