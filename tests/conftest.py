@@ -2,11 +2,12 @@
 service unit tests get an in-memory bus. `pytest --cpu-burners 2` runs the suite with both
 cores of a 2-core machine kept busy, as a loaded CI machine would be.
 
-The suite runs on two pytest-xdist workers (pyproject.toml's addopts). Every test of a module
-with a real-time test (marked `slow`: a simulated robot moving, a browser) runs on one worker,
-one after the other, as they always ran; the image test on its own (it mostly waits on
-downloads and disk); the rest, unit tests, spread over both. `-n 0` runs all in one
-process."""
+With `-n 2` (pytest-xdist: the day-to-day loop, `pytest -m "not slow" -n 2`) every test of a
+module with a real-time test (marked `slow`: a simulated robot moving, a browser) runs on one
+worker, one after the other, the image test on its own, and the unit tests spread over both.
+The whole suite runs in one process (CI): a real-time test beside the image's build, or beside
+other tests, lost its odometry for half a second (two cores, vfs copies), which no robot
+would."""
 
 import fcntl
 import os
