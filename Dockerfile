@@ -29,9 +29,14 @@ RUN apt-get update \
  && python3 -m venv /opt/asibot \
  && if [ -f /tmp/docker/extra-ca.crt ]; then export PIP_CERT=/tmp/docker/extra-ca.crt; fi \
  && /opt/asibot/bin/pip install --no-cache-dir --disable-pip-version-check -q --require-hashes -r /tmp/requirements/build.txt \
- && /opt/asibot/bin/pip install --no-cache-dir --disable-pip-version-check -q --require-hashes -r /tmp/requirements/runtime.txt
+ && /opt/asibot/bin/pip install --no-cache-dir --disable-pip-version-check -q --require-hashes -r /tmp/requirements/runtime.txt \
+ && site=/opt/asibot/lib/python3.11/site-packages \
+ && rm -rf $site/cmeel.prefix/include && find $site/cmeel.prefix -name '*.a' -delete
+# (Pinocchio's wheels carry C++ headers and static libraries, 200 MB nothing here compiles against.)
 # Our own packages, every one but the test helpers (libs/testing), built with the locked
-# setuptools: nothing unlocked is fetched. (Few layers: vfs storage copies each one whole.)
+# setuptools: nothing unlocked is fetched. The page's npm bundle goes in with the web package.
+# (Few layers: vfs storage copies each one whole, and an image's layers are what changes.)
+COPY --from=web /web/asibot/web/static/vendor /src/services/web/asibot/web/static/vendor
 COPY . /src
 RUN cd /src \
  && /opt/asibot/bin/pip install --no-cache-dir --disable-pip-version-check -q --no-deps --no-build-isolation \
@@ -50,8 +55,6 @@ RUN apt-get update \
  && useradd --create-home --uid 1000 --shell /usr/sbin/nologin asibot \
  && mkdir -p /app/recordings /data \
  && chown asibot:asibot /app/recordings /data
-COPY --from=python /opt/asibot /opt/asibot
-COPY --from=web /web/asibot/web/static/vendor /opt/asibot/lib/python3.11/site-packages/asibot/web/static/vendor
 ENV PATH=/opt/asibot/bin:$PATH \
     PYTHONUNBUFFERED=1 \
     MUJOCO_GL=osmesa \
@@ -61,3 +64,5 @@ USER asibot
 # Recordings and user data live in volumes, never in the image.
 VOLUME ["/app/recordings", "/data"]
 CMD ["asibot", "--help"]
+# Last: the one layer a change of our code rebuilds (the settings above are cached).
+COPY --from=python /opt/asibot /opt/asibot

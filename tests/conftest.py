@@ -14,7 +14,6 @@ import os
 import signal
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 import pytest
@@ -62,20 +61,23 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.xdist_group("realtime"))
 
 
-def _quiet_lock(config) -> Path:
-    """One file per run, shared by its workers: `quiet` below."""
-    run = getattr(config, "workerinput", {}).get("testrunuid", f"solo-{os.getpid()}")
-    return Path(tempfile.gettempdir()) / f"asibot-quiet-{run}.lock"
+@pytest.fixture(scope="session")
+def _quiet_lock(request, tmp_path_factory) -> Path | None:
+    """Under xdist, one file per run shared by its workers (in the run's temporary folder, which
+    pytest clears with it): `quiet` below. Alone, nothing to share."""
+    if not hasattr(request.config, "workerinput"):
+        return None
+    return tmp_path_factory.getbasetemp().parent / "quiet.lock"
 
 
 @pytest.fixture(autouse=True)
-def _share_the_cores(request):
+def _share_the_cores(request, _quiet_lock):
     """Every test holds the run's lock shared, so a `quiet` test can have the cores alone; not the
     image test, which is minutes of downloads and disk copies a quiet test need not wait for."""
-    if request.node.get_closest_marker("docker"):
+    if _quiet_lock is None or request.node.get_closest_marker("docker"):
         yield None
         return
-    with open(_quiet_lock(request.config), "a") as f:
+    with open(_quiet_lock, "a") as f:
         fcntl.flock(f, fcntl.LOCK_SH)
         yield f
 
@@ -84,6 +86,9 @@ def _share_the_cores(request):
 def quiet(_share_the_cores):
     """The other worker waits (between its tests) while this test runs: for a test whose input
     the load itself would spoil (see burners_paused)."""
+    if _share_the_cores is None:        # one process: nothing else runs meanwhile
+        yield
+        return
     # Our shared hold becomes the whole lock once the other worker's test in flight has ended.
     fcntl.flock(_share_the_cores, fcntl.LOCK_EX)
     try:

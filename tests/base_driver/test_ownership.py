@@ -102,3 +102,35 @@ def test_the_estop_outlives_whoever_engaged_it_and_its_release_says_who(base):
         release_counts_only_signed(late, ROBOT, lambda code: events(base, code), "bob@home (asibot release, pid 8)")
     finally:
         late.close()
+
+
+def test_a_joystick_takes_the_base_from_nav_at_once_and_nav_drives_again_once_it_is_quiet(base):
+    """twist_mux's rule, in the driver: a person's controller (TELEOP) overtakes nav (AUTONOMOUS)
+    with its first command; nav's are refused while it drives and for TAKEOVER_HOLD after."""
+    nav_bus, joy_bus = Bus("nav"), Bus("a-joystick-program")
+    try:
+        base.controller_bus.close()                      # the fixture's controller ends: nav holds
+        nav = ownership.announce(nav_bus, ROBOT, "base", "nav")
+        joystick = ownership.announce(joy_bus, ROBOT, "base", "joystick")
+        wait_until(lambda: base.svc.holder.current == nav.id and joystick.id in base.svc.holder.alive, 5)
+        to_base = base.user.publisher(keys.base_cmd_vel(ROBOT), Twist)
+        time.sleep(COMMAND_WATCHDOG_S)                   # nav's stream begins after the change of holder
+        nav_stream = Stream(lambda: nav.put(to_base, Twist(vx=0.2, wz=0.0)))
+        with nav_stream:
+            wait_until(lambda: base.emulator.robot.target_vel == 200, 3, message="nav never drove")
+            with Stream(lambda: joystick.put(to_base, Twist(vx=-0.1, wz=0.0))):
+                wait_until(lambda: base.emulator.robot.target_vel == -100, 3, message="the joystick never drove")
+                assert base.svc.holder.current == joystick.id
+                time.sleep(0.3)
+                assert base.emulator.robot.target_vel == -100, "nav's stream fought the joystick's"
+            # the joystick let go: the base stops (the driver's watchdog), and nav's stream still
+            # running from before the takeover does not move it again
+            wait_until(lambda: base.svc.holder.current == nav.id, ownership.TAKEOVER_HOLD + 2,
+                       message="the base was never given back to nav")
+            stays_still(base, 0.5)
+        time.sleep(COMMAND_WATCHDOG_S)                   # a new motion of nav's drives
+        with Stream(lambda: nav.put(to_base, Twist(vx=0.15, wz=0.0))):
+            wait_until(lambda: base.emulator.robot.target_vel == 150, 3, message="nav could not drive again")
+    finally:
+        joy_bus.close()
+        nav_bus.close()

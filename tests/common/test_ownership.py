@@ -150,3 +150,70 @@ def test_hold_wait_asks_the_driver_until_it_names_us_and_not_after(memory_bus):
         driver.close()
     finally:
         bus.close()
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def test_priority_follows_the_controllers_name():
+    nav, joystick = ownership.Controller("p", "base", "nav"), ownership.Controller("p", "base", "joystick")
+    assert ownership.priority(nav.id) == ownership.AUTONOMOUS == ownership.priority("nav")
+    assert ownership.priority(joystick.id) == ownership.TELEOP > ownership.AUTONOMOUS
+    assert ownership.priority("navigator-abc") == ownership.TELEOP     # only the name itself counts
+
+
+def test_a_person_takes_the_base_from_nav_at_once_and_gives_it_back_once_quiet():
+    clock, changes = Clock(), []
+    h = ownership.Holder("p", "base", on_change=changes.append, clock=clock)
+    nav, joystick = ownership.Controller("p", "base", "nav"), ownership.Controller("p", "base", "joystick")
+    for c in (nav, joystick):
+        h.update(keys.base_controller_alive("p", c.id), True)
+    assert h.current == nav.id and changes == [nav.id]
+    assert h.refusal(nav.sign(Twist(vx=0.3, wz=0.0))) is None
+    # the joystick's first command takes the base: obeyed, and nav's are refused from then on
+    assert h.refusal(joystick.sign(Twist(vx=0.1, wz=0.2))) is None
+    assert h.current == h.taker == joystick.id and changes == [nav.id, joystick.id]
+    refused = h.refusal(nav.sign(Twist(vx=0.3, wz=0.0)))
+    assert refused.code == "not_holder" and f"controller {joystick.id!r} holds the base of p" in str(refused)
+    # it keeps the base while it commands at least every TAKEOVER_HOLD s
+    for _ in range(5):
+        clock.now += ownership.TAKEOVER_HOLD * 0.9
+        h.tick()
+        assert h.refusal(joystick.sign(Twist(vx=0.1, wz=0.0))) is None
+    clock.now += ownership.TAKEOVER_HOLD * 0.9
+    h.tick()
+    assert h.current == joystick.id and changes == [nav.id, joystick.id]
+    clock.now += ownership.TAKEOVER_HOLD * 0.2                     # quiet for longer than the hold
+    h.tick()
+    assert h.current == nav.id and h.taker is None and changes == [nav.id, joystick.id, nav.id]
+    assert h.refusal(nav.sign(Twist(vx=0.3, wz=0.0))) is None
+    # it takes it again with its next command; and gives it back at once when it ends
+    assert h.refusal(joystick.sign(Twist(vx=0.0, wz=0.1))) is None and h.current == joystick.id
+    h.update(keys.base_controller_alive("p", joystick.id), False)
+    assert h.current == nav.id and changes == [nav.id, joystick.id, nav.id, joystick.id, nav.id]
+
+
+def test_only_a_signed_new_command_of_a_higher_priority_takes_the_base():
+    h = ownership.Holder("p", "base", clock=Clock())
+    nav, joystick, other = (ownership.Controller("p", "base", n) for n in ("nav", "joystick", "teleop"))
+    for c in (joystick, nav, other):
+        h.update(keys.base_controller_alive("p", c.id), True)
+    assert h.current == joystick.id and h.taker is None   # the oldest: a person's program, idle
+    assert h.refusal(nav.sign(Twist(vx=0.3, wz=0.0))).code == "not_holder"     # nav waits its turn
+    assert h.refusal(other.sign(Twist(vx=0.3, wz=0.0))).code == "not_holder"   # same priority: in line
+    h.update(keys.base_controller_alive("p", joystick.id), False)
+    assert h.current == nav.id
+    unsigned = Twist(vx=0.2, wz=0.0, controller=other.id)
+    assert h.refusal(unsigned).code == "not_signed" and h.current == nav.id
+    forged = dataclasses.replace(Identity("teleop").sign(unsigned, "p/base"), controller=other.id)
+    assert h.refusal(forged).code == "not_signed" and h.current == nav.id
+    stranger = ownership.Controller("p", "base", "joystick")          # not alive: not in line at all
+    assert h.refusal(stranger.sign(Twist(vx=0.2, wz=0.0))).code == "not_holder" and h.current == nav.id
+    first = other.sign(Twist(vx=0.2, wz=0.0))
+    assert h.refusal(first) is None and h.current == other.id
+    assert h.refusal(first).code == "replayed"

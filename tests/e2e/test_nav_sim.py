@@ -14,10 +14,12 @@ import numpy as np
 import pytest
 
 from asibot import keys
+from asibot.bus import Bus
+from asibot.safety import ownership
 from asibot import messages as m
 from asibot.client import NavClient
 from asibot.errors import RpcError
-from asibot.testing import Inbox, Stack, wait_until
+from asibot.testing import Inbox, Stack, Stream, wait_until
 
 ROOT = Path(__file__).resolve().parents[2]
 ROBOT = "pioneer-sim"
@@ -239,6 +241,43 @@ def test_estop_ends_a_goal_and_nothing_resumes(stack):
     assert stack.base.status()["state"] == "canceled"
     assert still_since(stack, mark, samples=20)       # a second after the release: nothing resumed
     assert client_bus is stack.base._connected()
+
+
+def test_a_person_at_a_joystick_takes_the_base_from_a_goal_and_nav_drives_again_after(stack):
+    """twist_mux's rule: a joystick program (a TELEOP controller) overtakes nav's goal with its
+    first command; nav ends the goal with a sentence and refuses new ones while the person
+    drives; once the joystick has been quiet for TAKEOVER_HOLD, nav drives again."""
+    with Bus("a-joystick-program") as bus:
+        joystick = ownership.announce(bus, ROBOT, "base", "joystick")
+        to_base = bus.publisher(keys.base_cmd_vel(ROBOT), m.Twist)
+        gid = stack.base.goto("desk")
+        wait_until(lambda: not standing_still(stack), 10, interval=0.1, message="nav never set off")
+        with Stream(lambda: joystick.put(to_base, m.Twist(vx=0.0, wz=0.4)), period=0.05):
+            with pytest.raises(RpcError) as err:
+                stack.base.wait(gid, timeout=5)
+            assert err.value.code == "busy" and "took over the base (driven by hand)" in err.value.message
+            ended = [e.text for e in stack.events.all() if "took over the base" in e.text]
+            assert ended and ended[-1].startswith("Stopped: joystick-"), ended
+            # the sim obeys the joystick: a turn on the spot, not nav's way to the desk
+            mark = stack.truth.mark()
+            wait_until(lambda: len(stack.truth.since(mark)) > 30, 5)
+            turned = stack.truth.since(mark)
+            assert np.ptp(np.unwrap(turned[:, 2])) > 0.3 and max(np.ptp(turned[:, 0]), np.ptp(turned[:, 1])) < 0.1
+            with pytest.raises(RpcError, match="by hand") as err:
+                stack.base.goto("desk")
+            assert err.value.code == "busy"
+        wait_until(lambda: standing_still(stack), 5, interval=0.05, message="the base went on after the joystick let go")
+
+        def accepted() -> int | None:
+            try:
+                return stack.base.goto("desk")
+            except RpcError as exc:
+                assert exc.code == "busy", exc
+                return None
+        again = wait_until(accepted, ownership.TAKEOVER_HOLD + 8, interval=0.5, message="nav never drove again")
+        wait_until(lambda: not standing_still(stack), 10, interval=0.1, message="nav's new goal did not move the base")
+        stack.base.cancel(again)
+        wait_until(lambda: standing_still(stack), 5, interval=0.05)
 
 
 @pytest.mark.timeout(400)

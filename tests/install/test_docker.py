@@ -7,6 +7,7 @@ images made on this machine (docker/make-local-bases). Needs root; CI runs as ro
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import shutil
@@ -26,6 +27,7 @@ from asibot.testing import free_port, wait_until
 ROOT = Path(__file__).resolve().parents[2]
 PROJECT = "asibot-test"
 IMAGE = "asibot:test"
+STAGES = ("web", "python")      # the Dockerfile's build stages
 #: The machine's download proxy's certificate authority, for pip and npm inside the build.
 MACHINE_CA = Path("/etc/ssl/certs/ca-certificates.crt")
 
@@ -39,24 +41,43 @@ def run(argv: list[str], env: dict[str, str], timeout: float, **kw) -> subproces
     return done
 
 
+#: The engine's storage, kept between runs as a CI keeps its Docker layer cache: the base
+#: images and the locked packages' layer are built once; each run rebuilds what its commit
+#: changed. Emptied when it outgrows CACHE_LIMIT (vfs keeps every layer whole).
+CACHE = Path(os.environ.get("ASIBOT_DOCKER_CACHE", "/var/cache/asibot/docker-test"))
+CACHE_LIMIT = 40e9
+
+
+def cache_size(folder: Path) -> int:
+    done = subprocess.run(["du", "-sb", str(folder)], capture_output=True, text=True)
+    return int(done.stdout.split()[0]) if done.returncode == 0 else 0
+
+
 @pytest.fixture(scope="module")
 def engine(tmp_path_factory: pytest.TempPathFactory):
     """A Docker engine of the test's own, with the recipe of docs/docker.md; its environment."""
     if os.geteuid() != 0:
         pytest.skip("the image test runs its own Docker engine, which needs root (CI runs as root)")
     assert shutil.which("dockerd"), "the image test needs Docker's engine: ./bootstrap installs docker.io as root"
+    CACHE.mkdir(parents=True, exist_ok=True)
+    hold = open(CACHE.with_suffix(".lock"), "w")
+    fcntl.flock(hold, fcntl.LOCK_EX)            # one engine on the cache at a time
+    if cache_size(CACHE) > CACHE_LIMIT:
+        shutil.rmtree(CACHE)
     folder = Path(tmp_path_factory.mktemp("docker", numbered=True))
     sock = folder / "docker.sock"
     log = open(folder / "dockerd.log", "w")
     daemon = subprocess.Popen(
         ["dockerd", "--storage-driver=vfs", "--iptables=false", "--ip6tables=false", "--bridge=none",
-         "--data-root", str(folder / "root"), "--exec-root", str(folder / "exec"),
+         "--data-root", str(CACHE), "--exec-root", str(folder / "exec"),
          "--pidfile", str(folder / "docker.pid"), "-H", f"unix://{sock}"],
         stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
     env = {**os.environ, "DOCKER_HOST": f"unix://{sock}"}
     try:
         wait_until(lambda: subprocess.run(["docker", "info"], env=env, capture_output=True).returncode == 0,
                    60, interval=0.5, message=lambda: (folder / "dockerd.log").read_text()[-2000:])
+        # a run cut short leaves its containers; they would hold the old image's layers
+        run(["docker", "container", "prune", "-f"], env, 600)
         yield env
     finally:
         daemon.send_signal(signal.SIGTERM)
@@ -65,11 +86,12 @@ def engine(tmp_path_factory: pytest.TempPathFactory):
         except subprocess.TimeoutExpired:
             daemon.kill()
         log.close()
-        # The engine leaves its network namespace mounted; then the folder goes (vfs: gigabytes).
+        # The engine leaves its network namespace mounted; then the folder goes.
         for mount in reversed(Path("/proc/mounts").read_text().splitlines()):
             if mount.split()[1].startswith(str(folder)):
                 subprocess.run(["umount", "-l", mount.split()[1]], capture_output=True)
         shutil.rmtree(folder, ignore_errors=True)
+        hold.close()
 
 
 @pytest.fixture(scope="module")
@@ -86,8 +108,14 @@ def image(engine: dict[str, str], tmp_path_factory: pytest.TempPathFactory) -> d
     started = time.monotonic()
     run([str(ROOT / "docker" / "make-local-bases")], engine, 900)
     bases = time.monotonic() - started
-    run(["docker", "build", "--network", "host", "-q", "--build-arg", "BASE=local/debian:bookworm",
-         "--build-arg", "NODE=local/node:host", "-t", IMAGE, str(context)], engine, 1800)
+    build = ["docker", "build", "--network", "host", "-q", "--build-arg", "BASE=local/debian:bookworm",
+             "--build-arg", "NODE=local/node:host"]
+    # The stages by name too: an untagged stage is pruned below with the older builds' layers,
+    # and with it the cache of its downloads.
+    for stage in STAGES:
+        run([*build, "--target", stage, "-t", f"{IMAGE}-{stage}", str(context)], engine, 1800)
+    run([*build, "-t", IMAGE, str(context)], engine, 1800)
+    run(["docker", "image", "prune", "-f"], engine, 600)
     built = time.monotonic() - started - bases
     size = int(run(["docker", "image", "inspect", "-f", "{{.Size}}", IMAGE], engine, 60).stdout)
     print(f"\nimage {IMAGE}: {size / 1e6:.0f} MB; base images {bases:.0f} s, build {built:.0f} s")

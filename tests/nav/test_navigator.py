@@ -133,17 +133,55 @@ def test_blocked_for_good_aborts_after_the_recoveries(apartment, world_places):
     assert status.recoveries == 5
 
 
-def test_lost_localisation_aborts(apartment, world_places):
+def _lose_track_on_the_way(apartment, world_places) -> tuple[Harness, list[float]]:
+    """A trip from the charging station to the desk that loses track of where it is after 3 s:
+    the harness says "not localised" until the test says otherwise; the turn made meanwhile."""
+    h = make(apartment, world_places.get("charging station").pose)
+    h.nav.goto(h.now, world_places.get("desk").pose, "desk", h.pose())
+    h.run(lambda: False, limit=3.0)
+    assert h.nav.status.state == ACTIVE and h.sim.vx > 0.05, h.nav.status.text
+    headings = [h.sim.pose.theta]
+    h.localised = lambda: (headings.append(h.sim.pose.theta), False)[1]
+    return h, headings
+
+
+def test_lost_on_the_way_it_stops_then_turns_on_the_spot_and_goes_on_once_found(apartment, world_places):
+    h, headings = _lose_track_on_the_way(apartment, world_places)
+    at, mark = h.sim.pose, len(h.commands)
+    h.run(lambda: h.sim.wz > 0.1, limit=5.0)           # it waits, still, then starts to turn
+    waited = h.commands[mark:]
+    assert h.now - 3.0 >= h.nav.params.lost_timeout - 0.15 and all(vx == 0.0 for vx, _ in waited), waited
+    assert "I am not sure where I am on the way to desk; turning on the spot" in h.nav.status.text
+
+    def turned() -> float:
+        return float(np.ptp(np.unwrap(headings)))
+    h.run(lambda: turned() > math.pi / 2, limit=20.0)  # the filter "finds" the robot a quarter turn on
+    assert h.sim.pose.distance(at) < 0.1, "it drove while it did not know where it was"
+    h.localised = lambda: True
+    h.run(lambda: h.nav.status.state != ACTIVE, limit=90.0)
+    assert h.nav.status.state == SUCCEEDED, h.nav.status.text
+    assert on_goal(h.sim, world_places.get("desk").pose) and not h.sim.collided
+
+
+def test_lost_on_the_way_and_not_found_in_a_whole_turn_aborts_with_a_sentence(apartment, world_places):
+    h, headings = _lose_track_on_the_way(apartment, world_places)
+    at = h.sim.pose
+    h.run(lambda: h.nav.status.state != ACTIVE, limit=60.0)
+    assert h.nav.status.state == ABORTED
+    assert h.nav.status.text.startswith("could not reach desk: I am not sure where I am any more, even after "
+                                        "turning on the spot to look. Set my position"), h.nav.status.text
+    assert np.ptp(np.unwrap(headings)) > 1.9 * math.pi and h.sim.pose.distance(at) < 0.1
+    h.run(lambda: False, limit=1.0)
+    assert abs(h.sim.vx) < 1e-6 and abs(h.sim.wz) < 1e-6, "still moving after the goal ended"
+
+
+def test_a_nan_pose_is_a_lost_robot_not_a_crash(apartment, world_places):
     h = make(apartment, world_places.get("charging station").pose)
     h.nav.goto(h.now, world_places.get("desk").pose, "desk", h.pose())
     for k in range(25):
-        h.nav.step(h.now + 0.1 * k, h.pose(), None, None, localised=False)
-    assert h.nav.status.state == ABORTED and "not sure where I am" in h.nav.status.text
-    h.nav.goto(h.now, world_places.get("desk").pose, "desk", h.pose())
-    for k in range(25):                                          # a NaN pose is a lost robot, not a crash
         cmd = h.nav.step(h.now + 0.1 * k, Pose(math.nan, 1.0, 0.0), h.sim.scan(), None)
         assert cmd is None or (cmd.vx, cmd.wz) == (0.0, 0.0)
-    assert h.nav.status.state == ABORTED
+    assert h.nav.status.state == ABORTED and "not sure where I am" in h.nav.status.text
 
 
 def test_local_controller_limits_and_blocking(apartment):

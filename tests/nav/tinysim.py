@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
@@ -112,6 +113,8 @@ class Harness:
         self.sim, self.amcl, self.nav, self.dt = sim, amcl, navigator, dt
         self.now = 0.0
         self.commands: list[tuple[float, float]] = []
+        #: what the loop tells the navigator about the filter (a test makes it lose track)
+        self.localised: Callable[[], bool] = lambda: True
 
     def pose(self) -> Pose:
         return self.amcl.pose(self.sim.odom)
@@ -123,7 +126,7 @@ class Harness:
     def step(self) -> None:
         scan = self.sim.scan()
         self.amcl.update(self.sim.odom, scan)
-        cmd = self.nav.step(self.now, self.pose(), scan, odometry(self.sim))
+        cmd = self.nav.step(self.now, self.pose(), scan, odometry(self.sim), localised=self.localised())
         vx, wz = (cmd.vx, cmd.wz) if cmd is not None else (0.0, 0.0)
         self.commands.append((vx, wz))
         for _ in range(2):

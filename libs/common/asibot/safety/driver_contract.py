@@ -12,6 +12,8 @@ small contract, a backend behind it):
   most one a second per reason (`asibot.safety.events.EventThrottle`), and moves nothing;
 - the estop is followed and kept served after its sender exits (`asibot.safety.estop`); a release
   that is not signed is refused with an Event;
+- a part taken by priority goes back when its taker goes quiet (`Holder.tick`, every
+  `TICK_S`), with the same stop and re-arming as any change of holder;
 - `status` says who holds each part beside what the driver says of itself; `reset_fault` and
   the driver's own verbs (a table of `asibot.verbs`, beside `VERBS`) are served, each request
   checked by its table; `driver_alive` is announced last, once all of it answers.
@@ -24,6 +26,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import threading
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Mapping
 
@@ -36,6 +39,9 @@ from asibot.safety.ownership import Holder, NotHolder, holders_status
 from asibot.verbs import Handler, Verb, serve as serve_verbs
 
 log = logging.getLogger(__name__)
+
+#: s between two looks at whether a part taken by priority goes back (asibot.safety.ownership)
+TICK_S = 0.1
 
 
 @dataclass(frozen=True)
@@ -103,6 +109,7 @@ class DriverContract:
         self.rejected = 0            # every command refused, for whatever reason
         self._status: Callable[[], dict] = dict
         self.estop: EStopState | None = None
+        self._closed = threading.Event()
 
     def serve(self, commands: Iterable[Command], *,
               on_holder: Callable[[str, str | None], None],
@@ -132,7 +139,16 @@ class DriverContract:
                           on_reject=lambda key, exc, c=c: self.refuse(c.name, exc))
         serve_verbs(bus, lambda verb: keys.driver_rpc(robot, verb), {**VERBS, **verbs},
                     {"status": lambda args: self.status(), "reset_fault": lambda args: reset_fault(), **handlers})
+        self._ticking = threading.Thread(target=self._tick, name=f"holders-{robot}", daemon=True)
+        self._ticking.start()
         bus.announce(keys.driver_alive(robot))
+
+    def _tick(self) -> None:
+        """Give a part back once the controller that took it by priority went quiet
+        (`Holder.tick`), within a tenth of a second."""
+        while not self._closed.wait(TICK_S):
+            for holder in list(self.holders.values()):
+                holder.tick()
 
     def _receiver(self, c: Command) -> Callable[[str, Any], None]:
         holder = self.holders[c.kind.part]
@@ -183,4 +199,5 @@ class DriverContract:
         return {**holders, "not_holder": self.not_holder, "commands_rejected": self.rejected}
 
     def close(self) -> None:
+        self._closed.set()
         self.refusals.close()

@@ -22,6 +22,14 @@ CANopen arm driver, the ARCOS base driver, the sim):
   any other command (another controller's, one that borrows the holder's id, a replayed or
   anonymous one) is refused whole with an Event, rate-limited like every refusal
   (`asibot.safety.events.EventThrottle`), and moves nothing.
+- A person driving comes first (twist_mux's priorities): a controller's `priority` follows
+  from its name (`priority`): nav's goals are `AUTONOMOUS`, every other controller (a
+  joystick, a teleop program) `TELEOP`. A controller of higher priority than the holder takes
+  the part with its first command (signed and new, as the holder's must be) and keeps it while
+  it commands at least every `TAKEOVER_HOLD` s and stays alive; then the part goes back to
+  the oldest alive. Controllers of the same priority wait in line as above. A controller
+  that was overtaken hears it (`Holder.on_change`, as the driver does) and ends its own
+  motion: nav ends its goal with a sentence the user sees.
 - Stopping needs no ownership: the estop stops every part whoever engages it, and the
   kinematics `stop` verb (`CartesianClient.stop()`) makes the holder command a hold,
   whoever moved the arm. A change of holder, or its loss, stops the part and re-arms it
@@ -46,6 +54,20 @@ from asibot.safety.identity import Identity
 
 #: The parts of a robot that have a holder: the arm with its gripper, and the mobile base.
 PARTS = ("arm", "base")
+
+#: Priorities (twist_mux's): a person driving takes a part from a program driving on its own.
+AUTONOMOUS, TELEOP = 0, 10
+#: The controllers, by name, that drive on their own: every other one is a person's (TELEOP).
+AUTONOMOUS_NAMES = frozenset({"nav"})
+#: s a controller that took a part by priority keeps it after its last command (a joystick's
+#: hand resting a moment is still driving), as twist_mux's per-input timeout.
+TAKEOVER_HOLD = 2.0
+
+
+def priority(controller: str) -> int:
+    """The priority of a controller id ("<name>-<key>", asibot.safety.identity): by its name."""
+    name, sep, _ = controller.rpartition("-")
+    return AUTONOMOUS if (name if sep else controller) in AUTONOMOUS_NAMES else TELEOP
 
 
 def token_key(robot: str, part: str, controller: str) -> str:
@@ -121,30 +143,64 @@ class Replayed(CommandRefused):
 
 
 class Holder:
-    """Which controller holds `part` of `robot` now, from the liveliness of its controllers.
+    """Which controller holds `part` of `robot` now, from the liveliness of its controllers and
+    the commands that take the part by priority (see above).
 
-    `update(key, alive)` is a `bus.watch` callback (`follow` wires it); `on_change(holder)`
-    is called, outside the lock, with the new holder or None when it changes.
+    `update(key, alive)` is a `bus.watch` callback (`follow` wires it); `refusal(cmd)` judges
+    each command; `tick()`, called now and then, gives the part back once a controller that
+    took it has gone quiet. `on_change(holder)` is called, outside the lock, with the new
+    holder or None whenever it changes, by any of the three.
     """
 
     def __init__(self, robot: str, part: str = "arm",
-                 on_change: Callable[[str | None], None] | None = None) -> None:
+                 on_change: Callable[[str | None], None] | None = None,
+                 hold: float = TAKEOVER_HOLD, clock: Callable[[], float] = time.monotonic) -> None:
         self.pattern = pattern(robot, part)
         self.robot, self.part = robot, part
         self.context = context(robot, part)
+        self.hold, self.clock = hold, clock
         self._on_change = on_change
         self._alive: list[str] = []          # ids in the order they came alive
         self._obeyed: dict[tuple[str, str], int] = {}   # (id, type) -> newest sequence number
+        self._taken: tuple[str, float] | None = None    # who took the part by priority, last command
+        self._told: str | None = None         # the holder on_change last heard of
         self._lock = threading.Lock()
+
+    def _holder(self, now: float) -> str | None:
+        """The holder at `now` (under the lock): the one that took the part while it keeps it,
+        else the oldest alive."""
+        if self._taken is not None:
+            who, last = self._taken
+            if who in self._alive and now - last <= self.hold:
+                return who
+            self._taken = None
+        return self._alive[0] if self._alive else None
+
+    def _changed(self, now: float) -> tuple[bool, str | None]:
+        """(whether the holder changed since on_change last heard, the holder), under the lock."""
+        after = self._holder(now)
+        changed, self._told = after != self._told, after
+        return changed, after
+
+    def _tell(self, changed: bool, holder: str | None) -> None:
+        if changed and self._on_change is not None:
+            self._on_change(holder)
 
     @property
     def current(self) -> str | None:
         with self._lock:
-            return self._alive[0] if self._alive else None
+            return self._holder(self.clock())
+
+    @property
+    def taker(self) -> str | None:
+        """The controller that holds the part by priority (a person overtook the oldest), or None."""
+        with self._lock:
+            holder = self._holder(self.clock())
+            return holder if self._taken is not None else None
 
     @property
     def alive(self) -> list[str]:
-        """The controllers alive, in the order they hold the part (the holder first)."""
+        """The controllers alive, the oldest first (the holder first, unless one took the part)."""
         with self._lock:
             return list(self._alive)
 
@@ -160,37 +216,44 @@ class Holder:
         if controller is None:
             return
         with self._lock:
-            before = self._alive[0] if self._alive else None
             if alive and controller not in self._alive:
                 self._alive.append(controller)
             elif not alive and controller in self._alive:
                 self._alive.remove(controller)
                 for seen in [k for k in self._obeyed if k[0] == controller]:
                     del self._obeyed[seen]
-            after = self._alive[0] if self._alive else None
-        if after != before and self._on_change is not None:
-            self._on_change(after)
+            changed, holder = self._changed(self.clock())
+        self._tell(changed, holder)
+
+    def tick(self) -> None:
+        """Give the part back once a controller that took it has been quiet for `hold` s."""
+        with self._lock:
+            changed, holder = self._changed(self.clock())
+        self._tell(changed, holder)
 
     def refusal(self, cmd: Any) -> CommandRefused | None:
-        """None when the holder sent `cmd` (its id, signed by its key, newer than the last
-        obeyed of its type); otherwise the refusal, with its sentence. Call it once per
-        command: a command it lets through counts as obeyed."""
+        """None when `cmd` may move the part: the holder's, or one that takes the part by
+        priority (signed by its sender's key, newer than the last obeyed of its type, either
+        way); otherwise the refusal, with its sentence. Call it once per command: a command it
+        lets through counts as obeyed."""
         controller = cmd.controller
-        holder = self.current
         what = f"the {self.part} of {self.robot}"
+        with self._lock:
+            now = self.clock()
+            holder = self._holder(now)
+            takes = (controller != holder and controller in self._alive
+                     and (holder is None or priority(controller) > priority(holder)))
+            if controller and (controller == holder or takes):
+                why = self._signed_and_new(cmd, controller, f"{'holds' if controller == holder else 'may take'} {what}")
+                if why is not None:
+                    return why
+                if takes or (self._taken is not None and self._taken[0] == controller):
+                    self._taken = (controller, now)
+                changed, holder = self._changed(now)
+            else:
+                changed = False
         if controller and controller == holder:
-            why = identity.refusal(self.context, cmd)
-            if why is not None:
-                return NotSigned("not_signed", f"it names controller {identity.short(controller)}, which holds "
-                                               f"{what}, but {why}; a controller's commands are signed by "
-                                               "its own key (see asibot.safety.identity)")
-            seen = (controller, type(cmd).__name__)
-            with self._lock:
-                if cmd.seq <= self._obeyed.get(seen, 0):
-                    return Replayed("replayed", f"{identity.short(controller)} signed it, but it is not newer "
-                                                f"than a {type(cmd).__name__} already obeyed (number {cmd.seq}): "
-                                                "a copy played again")
-                self._obeyed[seen] = cmd.seq
+            self._tell(changed, holder)
             return None
         if holder is None:
             holds = f"no controller holds {what} (none is alive)"
@@ -199,6 +262,22 @@ class Holder:
         sender = f"from controller {controller!r}" if controller else "without a controller identity"
         return NotHolder("not_holder", f"it came {sender}, and {holds}; only the controller that holds "
                                        "a robot moves it (see asibot.safety.ownership)")
+
+    def _signed_and_new(self, cmd: Any, controller: str, role: str) -> CommandRefused | None:
+        """Under the lock: why `cmd` is not `controller`'s own new command, or None (then it
+        counts as obeyed). `role`: "holds the arm of asibot"."""
+        why = identity.refusal(self.context, cmd)
+        if why is not None:
+            return NotSigned("not_signed", f"it names controller {identity.short(controller)}, which {role}, "
+                                           f"but {why}; a controller's commands are signed by its own key "
+                                           "(see asibot.safety.identity)")
+        seen = (controller, type(cmd).__name__)
+        if cmd.seq <= self._obeyed.get(seen, 0):
+            return Replayed("replayed", f"{identity.short(controller)} signed it, but it is not newer "
+                                        f"than a {type(cmd).__name__} already obeyed (number {cmd.seq}): "
+                                        "a copy played again")
+        self._obeyed[seen] = cmd.seq
+        return None
 
 
 def holders_status(holders: Iterable[Holder]) -> dict:

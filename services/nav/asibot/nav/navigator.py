@@ -14,7 +14,8 @@ send (no goal: the base belongs to whoever else drives it). Replanning: every
 `replan_period`, and at once when the path ahead is blocked. Patience: a controller that
 finds no safe way for `controller_patience`, a plan that fails, or no progress (0.5 m in
 10 s, nav2's progress checker) starts the next recovery; when they are used up the goal is
-aborted with what was tried. Localisation lost for `lost_timeout` aborts too.
+aborted with what was tried. Localisation lost for `lost_timeout` makes the robot turn on the
+spot to find where it is; a whole turn that does not find it aborts.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ from asibot.nav.errors import NavError, Unreachable
 from asibot.nav.geometry import Pose, as_pose
 from asibot.nav.local import LocalController
 from asibot.nav.planner import GlobalPlanner, Path
-from asibot.nav.recovery import Recovery, default_recoveries
+from asibot.nav.recovery import Recovery, Spin, default_recoveries
 
 IDLE, ACTIVE, SUCCEEDED, ABORTED, CANCELED, PREEMPTED = "idle", "active", "succeeded", "aborted", "canceled", "preempted"
 TERMINAL = (SUCCEEDED, ABORTED, CANCELED, PREEMPTED)
@@ -50,7 +51,10 @@ class NavParams:
     controller_patience: float = 3.0
     progress_distance: float = 0.5
     progress_timeout: float = 10.0
+    #: s not localised (standing still) before the robot turns on the spot to find where it is
     lost_timeout: float = 2.0
+    look_speed: float = 0.5            # rad/s: slow enough for each scan to be placed where it was taken
+    look_timeout: float = 25.0         # s for that whole turn
     blocked_lookahead: float = 2.5     # m of path ahead checked against new obstacles
     nominal_speed: float = 0.35        # m/s for the ETA before the robot has moved
     #: A periodic replan takes a new way only if it is at most this much longer than what is
@@ -108,6 +112,7 @@ class Navigator:
         self._blocked_since: float | None = None
         self._progress_mark: tuple[float, Pose | None, float] = (0.0, None, math.inf)
         self._lost_since: float | None = None
+        self._looking: Spin | None = None      # the turn made to find where the robot is
         self._need_plan = True
         self._send_stop = False
 
@@ -164,7 +169,6 @@ class Navigator:
         at = scan_pose if scan_pose is not None else pose
         if scan is not None and finite and all(math.isfinite(v) for v in at):
             self.costmap.update_scan(at, scan, now)
-        localised = localised and finite
         goal = self.status.goal
         if self.status.state != ACTIVE or goal is None:   # an active status always has its goal
             if self._send_stop:
@@ -174,13 +178,13 @@ class Navigator:
         velocity = (float(odom.vx), float(odom.wz)) if odom is not None else (0.0, 0.0)
         label = goal_label(goal, self.status.place)
         # localisation
-        if not localised:
-            self._lost_since = now if self._lost_since is None else self._lost_since
-            if now - self._lost_since >= self.params.lost_timeout:
-                return self._abort(f"could not reach {label}: I am not sure where I am any more. "
-                                   "Set my position on the map (or drive me to the charging station) and try again.")
-            return Command(0.0, 0.0)
+        if not (localised and finite):
+            return self._find_where_i_am(now, pose, label, finite)
         self._lost_since = None
+        if self._looking is not None:                # found: on with the trip, by a new plan
+            self._looking = None
+            self._need_plan = True
+            self._progress_mark = (now, pose, math.inf)
         # recovering
         if self._recovery is not None:
             return self._recover(now, pose, label)
@@ -291,6 +295,30 @@ class Navigator:
             return Command(0.0, 0.0)
         return Command(step.vx, step.wz)
 
+    def _find_where_i_am(self, now: float, pose: Pose, label: str, finite: bool) -> Command:
+        """The filter spread out on the way (scans that stopped fitting: something not on the map
+        in view, a wheel that slipped). It updates only while the robot moves, so after
+        `lost_timeout` standing still the robot turns on the spot, as `localize` does, until the
+        scans fit again; a whole turn that does not find it aborts the goal."""
+        self._lost_since = now if self._lost_since is None else self._lost_since
+        if now - self._lost_since < self.params.lost_timeout:
+            return Command(0.0, 0.0)
+        gave_up = "Set my position on the map (or drive me to the charging station) and try again."
+        if not finite:              # no pose to turn about, or to check the turn against the costmap
+            return self._abort(f"could not reach {label}: I am not sure where I am any more. {gave_up}")
+        if self._looking is None:
+            self._looking = Spin(speed=self.params.look_speed, timeout=self.params.look_timeout,
+                                 name="turning on the spot to find where I am")
+            self._looking.start(now, pose, self.costmap)
+            self.controller.clear()
+        step = self._looking.step(now, pose, self.costmap)
+        self.status.text = f"I am not sure where I am on the way to {label}; {self._looking.name}"
+        if step.done:
+            why = f" ({step.failed})" if step.failed else ""
+            return self._abort(f"could not reach {label}: I am not sure where I am any more, even after turning "
+                               f"on the spot to look{why}. {gave_up}")
+        return Command(step.vx, step.wz)
+
     def _abort(self, text: str) -> Command:
         self._finish(ABORTED, text)
         self._send_stop = False
@@ -303,7 +331,7 @@ class Navigator:
         if state == SUCCEEDED:
             self.status.distance_remaining = 0.0
         self.controller.clear()
-        self._recovery = None
+        self._recovery = self._looking = None
         self._send_stop = state in (CANCELED, PREEMPTED)
         if self.status.goal_id is not None:
             self.results[self.status.goal_id] = self.status

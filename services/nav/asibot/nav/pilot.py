@@ -310,6 +310,12 @@ class Pilot:
         self._end_everything(now, "")
         return {"text": "stopped"}
 
+    def taken_over(self, now: float, who: str) -> None:
+        """A person took the base (a joystick, a teleop program: asibot.safety.ownership): end
+        what nav drives, with a sentence, and send nothing more (the base is theirs)."""
+        self._end_everything(now, f"{who} took over the base (driven by hand); ask me again once they stop")
+        self._halt = False
+
     def settings(self, change: str | None) -> dict:
         """One level of the primitives' speed or width (asibot.driving.CHANGES: faster, slower,
         wider, narrower); None: the levels now."""

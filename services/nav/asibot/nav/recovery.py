@@ -60,8 +60,10 @@ class ClearCostmap(Recovery):
 class Spin(Recovery):
     name = "turning on the spot to look around"
 
-    def __init__(self, angle: float = 2 * math.pi, speed: float = 0.8, timeout: float = 15.0) -> None:
+    def __init__(self, angle: float = 2 * math.pi, speed: float = 0.8, timeout: float = 15.0,
+                 name: str = "") -> None:
         self.angle, self.speed, self.timeout = angle, speed, timeout
+        self.name = name or self.name
 
     def start(self, now: float, pose: Pose, costmap: Costmap) -> None:
         super().start(now, pose, costmap)

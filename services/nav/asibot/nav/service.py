@@ -77,8 +77,11 @@ class NavService(Service):
         self._pub_event = bus.publisher(keys.events(robot), m.Event)
         self.me = ownership.announce(bus, robot, "base", "nav")
         self.controller = self.me.id
-        self.holder = ownership.Holder(robot, "base")
+        # Nav follows who holds the base as the driver does, the commands that take it by
+        # priority too (a person at a joystick), so it ends its goal the moment it is overtaken.
+        self.holder = ownership.Holder(robot, "base", on_change=self._on_holder)
         self.holder.follow(bus)
+        bus.subscribe(keys.base_cmd_vel(robot), m.Twist, self.holder.refusal)
         #: Before the first motion for each driver: wait until it names us the holder.
         self.hold = ownership.HoldWait(bus, robot, "base", self.controller)
         bus.watch(keys.driver_alive(robot), self.hold.forget)
@@ -111,6 +114,12 @@ class NavService(Service):
             self.pilot.estop(self.clock(), msg.engaged)
         self._publish_status(force=True)
 
+    def _on_holder(self, holder: str | None) -> None:
+        if holder is not None and holder != self.controller:
+            with self._lock:
+                self.pilot.taken_over(self.clock(), identity.short(holder))
+            self._publish_status(force=True)
+
     def _event(self, level: str, code: str, text: str) -> None:
         log.info("event %s/%s: %s", level, code, text)
         self._pub_event.put(m.Event(level=level, code=code, text=text[:1].upper() + text[1:]))
@@ -131,6 +140,7 @@ class NavService(Service):
         """One control cycle (the loop calls it at `rate`; tests may call it by hand)."""
         t0 = time.perf_counter()
         now = self.clock()
+        self.holder.tick()
         with self._lock:
             cmd = self.pilot.tick(now)
             pose = self.pilot.pose_message() if now - self._last_pose >= self.pose_period else None
@@ -154,6 +164,8 @@ class NavService(Service):
         self.slowest_cycle = max(self.slowest_cycle, time.perf_counter() - t0)
 
     def _send(self, vx: float, wz: float) -> None:
+        if self.holder.current not in (None, self.controller):
+            return       # another holds the base: the driver would refuse it, with an Event
         self.commands += 1
         self.me.put(self._pub_cmd, m.Twist(vx=float(vx), wz=float(wz)))
 
@@ -215,6 +227,9 @@ class NavService(Service):
             return
         holder = self.holder.current
         if holder not in (None, self.controller):
+            if holder == self.holder.taker:
+                raise RpcError("busy", f"{identity.short(holder)} drives the base of {self.robot} by hand; ask me "
+                                       f"again once it has stopped for {ownership.TAKEOVER_HOLD:g} s.")
             raise RpcError("busy", f"Another program drives the base of {self.robot} ({identity.short(holder)}); "
                                    "stop it first.")
         self.hold.wait(time.monotonic() + HOLD_GRACE)
