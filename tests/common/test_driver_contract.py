@@ -102,7 +102,8 @@ def test_status_verbs_estop_and_liveliness(driver):
     contract, rec, user, events, arm, base = driver
     assert user.alive(keys.driver_alive(R)) == [keys.driver_alive(R)]
     status = user.call(keys.driver_rpc(R, "status"))
-    assert status == {"ok": True, "robot": R, "mode": "idle", "holders": {"arm": arm.id, "base": base.id}}
+    assert status == {"ok": True, "robot": R, "mode": "idle", "holders": {"arm": arm.id, "base": base.id},
+                      "controllers": {"arm": [arm.id], "base": [base.id]}}
     assert user.call(keys.driver_rpc(R, "reset_fault")) == {"ok": True, "reset": True}
     assert user.call(keys.driver_rpc(R, "inject_fault"), {"fault": "silent"}) == {"ok": True, "injected": "silent"}
     with pytest.raises(RpcError, match="'fault' must be silent or clear; got 'meteor'"):

@@ -217,3 +217,20 @@ def test_only_a_signed_new_command_of_a_higher_priority_takes_the_base():
     first = other.sign(Twist(vx=0.2, wz=0.0))
     assert h.refusal(first) is None and h.current == other.id
     assert h.refusal(first).code == "replayed"
+
+
+def test_hold_wait_lets_a_person_command_once_the_driver_knows_it_is_alive(memory_bus):
+    """A joystick while nav holds the base: its first command takes the base, so it waits only
+    until the driver lists it among the base's controllers (else that command would be refused
+    and its stream count as one from before the takeover)."""
+    robot = "hold-wait-takeover"
+    nav, joystick = ownership.Controller(robot, "base", "nav"), ownership.Controller(robot, "base", "joystick")
+    said: list = [{"holders": {"base": nav.id}, "controllers": {"base": [nav.id]}}]
+    with Bus("joystick", memory_bus) as bus, Bus("base_driver", memory_bus) as driver:
+        driver.serve(keys.driver_rpc(robot, "status"), lambda req: said[-1])
+        assert not ownership.HoldWait(bus, robot, "base", joystick.id, poll=0.005).wait(time.monotonic() + 0.1)
+        said.append({"holders": {"base": nav.id}, "controllers": {"base": [nav.id, joystick.id]}})
+        assert ownership.HoldWait(bus, robot, "base", joystick.id, poll=0.005).wait(time.monotonic() + 2)
+        # nav, of lower priority than a joystick that holds the base, waits its turn
+        said.append({"holders": {"base": joystick.id}, "controllers": {"base": [nav.id, joystick.id]}})
+        assert not ownership.HoldWait(bus, robot, "base", nav.id, poll=0.005).wait(time.monotonic() + 0.1)

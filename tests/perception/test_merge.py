@@ -99,5 +99,7 @@ def test_a_silent_camera_is_left_out_and_named(front_back):
 def test_the_assembler_knows_its_cameras(front_back):
     with pytest.raises(ValueError, match="not one of"):
         ScanAssembler(["front"]).add("back", front_back[1], 0.0, 1)
-    with pytest.raises(ValueError, match="at least one"):
-        ScanAssembler([])
+    sonar_alone = ScanAssembler([])                 # no camera: nothing is due, nothing silent
+    assert sonar_alone.silent(0.0) == [] and sonar_alone.heard() == []
+    with pytest.raises(ValueError, match="not one of"):
+        sonar_alone.add("front", front_back[0], 0.0, 1)

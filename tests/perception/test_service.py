@@ -127,6 +127,54 @@ def test_the_sonar_on_the_bus_is_fused(h):
     wait_until(lambda: h.svc_bus.rejected == 1, 5)
 
 
+def test_with_no_depth_camera_each_sonar_reading_is_a_scan_with_one_return_per_echo(memory_bus):
+    """A P3-AT with sonar alone (the emulated one, a bare robot): the scan AMCL, the costmap and
+    the warnings read, from each reading; no echo is unknown, not free."""
+    bus, svc_bus = Bus("test"), Bus("perception")
+    svc = perception.build(svc_bus, args(depth_cameras=perception._names("none"), rgb_camera=""))
+    scans, events = Inbox(), Inbox()
+    bus.subscribe(keys.scan(ROBOT), m.LaserScan, scans)
+    bus.subscribe(keys.events(ROBOT), m.Event, events)
+    try:
+        assert svc.opt.depth_cameras == () and svc.opt.grid.beams == perception.SONAR_BEAMS
+        angles = [math.radians(d) for d in (90, 50, 30, 10, -10, -30, -50, -90, -90, -130, -150, -170, 170, 150,
+                                            130, 90)]
+        ranges = [4.335] * 16                          # no echo anywhere...
+        ranges[3] = ranges[4] = 0.5                    # ...but a wall 0.75 m ahead (sonar 3 and 4 at +-10 deg)
+        ranges[11] = 2.0                               # and something behind, to the right
+        bus.publisher(keys.base_odom(ROBOT), m.Odometry).put(m.Odometry(x=0, y=0, theta=0, vx=0.3, wz=0.0))
+        wait_until(lambda: svc._odom is not None, 5)
+        bus.publisher(keys.base_sonar(ROBOT), m.Sonar).put(m.Sonar(ranges=ranges, angles=angles, stamp=4242))
+        wait_until(lambda: len(scans), 5, message="no scan from the sonar")
+        scan = scans.last()
+        assert scan.stamp == 4242 and len(scan.ranges) == perception.SONAR_BEAMS
+        hit = np.flatnonzero(np.isfinite(scan.ranges))
+        assert len(hit) == 3, scan.ranges                 # three echoes, every other beam unknown
+        a = scan.angle_min + scan.angle_increment * hit
+        x, y = scan.ranges[hit] * np.cos(a), scan.ranges[hit] * np.sin(a)
+        ahead = x > 0
+        assert ahead.sum() == 2 and np.allclose(x[ahead], 0.245 + 0.5 * math.cos(math.radians(10)), atol=0.03)
+        behind = ~ahead
+        heading = math.radians(-170)                      # sonar 11, at (-0.241, -0.027) m
+        expected = (-0.241 + 2.0 * math.cos(heading), -0.027 + 2.0 * math.sin(heading))
+        assert math.hypot(x[behind][0] - expected[0], y[behind][0] - expected[1]) < 0.1   # 4 deg beams
+        wait_until(lambda: len(events), 5, message="no obstacle event from the sonar")
+        assert events.all()[0].code == "obstacle" and "ahead" in events.all()[0].text
+    finally:
+        svc.close()
+        bus.close()
+        svc_bus.close()
+
+
+def test_with_no_depth_camera_the_sonar_cannot_be_left_out(memory_bus):
+    bus = Bus("perception")
+    try:
+        with pytest.raises(ValueError, match="leave out --no-sonar"):
+            perception.build(bus, args(depth_cameras=(), no_sonar=True))
+    finally:
+        bus.close()
+
+
 def test_a_silent_camera_is_announced_once_and_its_return_too(memory_bus):
     clock = Clock()
     h = Harness(clock)

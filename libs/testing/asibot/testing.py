@@ -319,8 +319,16 @@ class Stack:
         self.web_port = free_port()
         self.web_url = f"http://127.0.0.1:{self.web_port}/"
         self.data = folder / "data"
+        #: the emulated Pioneer's ARCOS and control ports, and the AsTeRICS bridge's TCP and HTTP
+        #: ports (compose.yaml): this stack's own, unless the environment names them
+        ports = {name: int(os.environ.get(name) or free_port()) for name in (
+            "ASIBOT_PIONEER_EMULATOR_PORT", "ASIBOT_PIONEER_CONTROL_PORT", "ASIBOT_ASTERICS_PORT",
+            "ASIBOT_ASTERICS_HTTP_PORT")}
+        self.pioneer_port, self.pioneer_control = ports["ASIBOT_PIONEER_EMULATOR_PORT"], ports["ASIBOT_PIONEER_CONTROL_PORT"]
+        self.asterics_port, self.asterics_http_port = ports["ASIBOT_ASTERICS_PORT"], ports["ASIBOT_ASTERICS_HTTP_PORT"]
         self.env = dict(os.environ, ASIBOT_ROUTER=self.endpoint, ASIBOT_WEB_PORT=str(self.web_port),
-                        ASIBOT_DATA=str(self.data), ASIBOT_RECORDINGS=str(folder / "recordings"))
+                        ASIBOT_DATA=str(self.data), ASIBOT_RECORDINGS=str(folder / "recordings"),
+                        **{name: str(port) for name, port in ports.items()})
         shutil.copy(compose, folder / "compose.yaml")
         self.log_path = folder / "up.log"
         self._log = open(self.log_path, "w")

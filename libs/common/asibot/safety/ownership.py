@@ -281,9 +281,12 @@ class Holder:
 
 
 def holders_status(holders: Iterable[Holder]) -> dict:
-    """What a driver's `status` says of who holds its parts: {"holders": {"arm": id}}, with
-    "" for a part no controller holds. `HoldWait` reads it."""
-    return {"holders": {h.part: h.current or "" for h in holders}}
+    """What a driver's `status` says of who holds its parts and who may: {"holders": {"arm": id},
+    "controllers": {"arm": [ids alive, the oldest first]}}, with "" for a part no controller
+    holds. `HoldWait` reads it."""
+    holders = list(holders)
+    return {"holders": {h.part: h.current or "" for h in holders},
+            "controllers": {h.part: h.alive for h in holders}}
 
 
 class HoldWait:
@@ -295,7 +298,9 @@ class HoldWait:
     would be lost the same way. So a controller calls `wait` before its first motion request,
     and `forget` when a driver comes (back), since that driver learns who holds anew.
     A driver that does not say who holds `part` (no status verb, or no holder of that part
-    in it) is not waited for.
+    in it) is not waited for. A controller of higher priority than the holder (a person's
+    joystick while nav holds the base) waits until the driver knows it is alive: its first
+    command then takes the part.
     """
 
     def __init__(self, bus: Any, robot: str, part: str, controller: str, poll: float = 0.01) -> None:
@@ -315,9 +320,12 @@ class HoldWait:
                                        timeout=max(0.05, min(0.5, deadline - time.monotonic())))
             except RpcError:
                 return False   # no driver answers: the motion request says so itself
-            holders = status.get("holders")
+            holders, alive = status.get("holders"), status.get("controllers")
             holder = holders.get(self.part) if isinstance(holders, dict) else None
-            if holder is None or holder == self.controller:
+            known = alive.get(self.part, []) if isinstance(alive, dict) else []
+            takes = (isinstance(holder, str) and self.controller in known
+                     and priority(self.controller) > priority(holder))
+            if holder is None or holder == self.controller or takes:
                 self.held = True
             elif time.monotonic() >= deadline:
                 return False

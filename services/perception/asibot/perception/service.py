@@ -12,6 +12,10 @@ bus. Bad input (a NaN depth, an image whose shape is not its CameraInfo's, a Cam
 a zero focal length, a sonar message of the wrong length) is refused whole: counted and
 logged by `Bus.reject`, named in `health()`, and nothing is published from it.
 
+A robot with no depth camera (`--depth-cameras none`: the emulated or a bare P3-AT) gets
+its scan from the sonar ring alone, one per reading (`SonarRing.scan`), on a coarser grid
+(`SONAR_BEAMS`) so that localisation uses every echo.
+
 A camera silent for longer than `freshness` (default 0.5 s, five frames at 10 Hz) is left
 out of the scan, whose beams in its direction become unknown (NaN) rather than free; the
 user hears it once ("The back camera has sent no depth image for 0.5 s ...") and again
@@ -167,7 +171,11 @@ class PerceptionService(Service):
         except BadInput as exc:
             self.bus.reject(keys.base_sonar(self.robot), exc)
             return
-        self._sonar = (msg, self.clock())
+        now = self.clock()
+        self._sonar = (msg, now)
+        if not self.opt.depth_cameras:          # a robot with sonar alone: its scan, per reading
+            with self._lock:
+                self._put_scan(ring.scan(self.opt.grid, msg), msg.stamp, now)
 
     def _on_odom(self, msg: m.Odometry) -> None:
         if math.isfinite(msg.vx) and math.isfinite(msg.wz):
@@ -183,13 +191,17 @@ class PerceptionService(Service):
             ring = self.opt.sonar
             if ring is not None and self._sonar is not None and now - self._sonar[1] <= self.opt.freshness:
                 ranges = ring.fuse(self.opt.grid, ranges, self._sonar[0])
-            self._pub_scan.put(self.opt.grid.message(ranges, stamp))
-            self.scans += 1
-            odom = self._odom if self._odom is not None and now - self._odom[1] <= self.opt.freshness else None
-            direction, cap = travel_direction(odom[0].vx if odom else None, odom[0].wz if odom else None)
-            event = self.warner.update(clearance(ranges, self.opt.grid, direction), direction, now, cap)
-            if event is not None:
-                self._event(event)
+            self._put_scan(ranges, stamp, now)
+
+    def _put_scan(self, ranges: np.ndarray, stamp: int, now: float) -> None:
+        """Publish a scan and warn of what is near in the direction of travel (under the lock)."""
+        self._pub_scan.put(self.opt.grid.message(ranges, stamp))
+        self.scans += 1
+        odom = self._odom if self._odom is not None and now - self._odom[1] <= self.opt.freshness else None
+        direction, cap = travel_direction(odom[0].vx if odom else None, odom[0].wz if odom else None)
+        event = self.warner.update(clearance(ranges, self.opt.grid, direction), direction, now, cap)
+        if event is not None:
+            self._event(event)
 
     def _event(self, event: m.Event) -> None:
         self.events_sent += 1
@@ -266,22 +278,31 @@ def _sentence(exc: Exception) -> str:
 
 # ---------------------------------------------------------------------- command line
 def _names(text: str) -> tuple[str, ...]:
+    if text.strip().lower() == "none":
+        return ()
     names = tuple(n.strip() for n in text.split(",") if n.strip())
     if not names:
-        raise argparse.ArgumentTypeError("give at least one camera name, e.g. front,back")
+        raise argparse.ArgumentTypeError("give at least one camera name, e.g. front,back, or none (sonar alone)")
     return names
+
+
+#: Beams of a scan from sonar alone: AMCL uses at most 60 beams, every ((beams - 1) // 59)th,
+#: so up to 118 it takes each; 90 (4 deg) places each echo within 2 deg of its bearing.
+SONAR_BEAMS = 90
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--depth-cameras", type=_names, default=("front", "back"),
-                   help="depth cameras merged into the scan, comma-separated (default front,back)")
+                   help="depth cameras merged into the scan, comma-separated (default front,back); "
+                        "none: the scan from the sonar ring alone, at each reading")
     p.add_argument("--rgb-camera", default="rgb", help="camera for the object finder; '' for none (default rgb)")
     p.add_argument("--min-height", type=float, default=0.03, help="lowest obstacle above the floor, m (0.03)")
     p.add_argument("--max-height", type=float, default=1.0, help="highest obstacle that matters, m (1.0)")
     p.add_argument("--range-min", type=float, default=0.1, help="depth cameras' blind zone, m from the camera (0.1)")
     p.add_argument("--range-max", type=float, default=8.0,
                    help="reach, m: from each camera, and the scan's range_max from the base centre (8.0)")
-    p.add_argument("--beams", type=int, default=720, help="beams of the 360-degree scan (720: 0.5 deg)")
+    p.add_argument("--beams", type=int, default=None,
+                   help=f"beams of the 360-degree scan (720: 0.5 deg; {SONAR_BEAMS} from sonar alone)")
     p.add_argument("--freshness", type=float, default=0.5,
                    help="s after which a silent camera or sonar is left out of the scan (0.5)")
     p.add_argument("--no-sonar", action="store_true", help="do not fuse the sonar ring")
@@ -298,7 +319,11 @@ def build(bus: Bus, args: argparse.Namespace) -> PerceptionService:
     band.check()
     if not args.freshness > 0:
         raise ValueError("--freshness must be a positive number of seconds")
-    grid = ScanGrid(beams=args.beams, range_max=args.range_max)
+    if not args.depth_cameras and args.no_sonar:
+        raise ValueError("with no depth camera (--depth-cameras none) the scan comes from the sonar: "
+                         "leave out --no-sonar")
+    beams = args.beams or (720 if args.depth_cameras else SONAR_BEAMS)
+    grid = ScanGrid(beams=beams, range_max=args.range_max)
     return PerceptionService(bus, robot, Options(
         depth_cameras=args.depth_cameras, rgb_camera=rgb, band=band, grid=grid, freshness=args.freshness,
         sonar=None if args.no_sonar else SonarRing.p3at()))

@@ -1,4 +1,5 @@
-"""Sonar fused into the scan: what the depth cameras cannot see (glass, very close range).
+"""Sonar fused into the scan: what the depth cameras cannot see (glass, very close range);
+and the scan of a robot with no depth camera, from its sonar alone (`SonarRing.scan`).
 
 A depth camera sees through glass and has a blind zone near the robot; the Pioneer's ring of
 16 sonars hears both. A sonar reading says only "something at range r, somewhere in my
@@ -81,6 +82,19 @@ class SonarRing:
             raise BadInput("the sonar message contains a value that is not finite; ranges and angles must be "
                            "numbers (the maximum range means no echo).")
         return r, a
+
+    def scan(self, grid: ScanGrid, msg: Sonar) -> np.ndarray:
+        """The scan of a robot with sonar alone: each echo at the middle of its cone, seen from
+        the base centre; every other beam unknown (NaN), a silent sonar's too (no echo is not
+        "free"). The middle is the echo's likeliest place: an arc across the cone would put
+        most of its points where nothing is, for localisation and the costmap alike."""
+        r, heading = self.check(msg)
+        echo = (r >= self.min_range) & (r < self.max_range - 1e-3)
+        out = np.full(grid.beams, np.inf, np.float32)
+        pos = self.positions[echo]
+        grid.add(out, pos[:, 0] + r[echo] * np.cos(heading[echo]), pos[:, 1] + r[echo] * np.sin(heading[echo]))
+        out[~np.isfinite(out)] = np.nan
+        return out
 
     def fuse(self, grid: ScanGrid, ranges: np.ndarray, msg: Sonar) -> np.ndarray:
         """`ranges` (the depth scan, left untouched) with the unexplained echoes of `msg` laid in."""
