@@ -36,8 +36,10 @@ CANopen arm driver, the ARCOS base driver, the sim):
   (`asibot.safety.arming`): a stream still running from before does not move it.
 
 Anyone on the router may still announce a controller (keeping strangers off the router is
-the router's job, `asibot.access`): while another holds a part, a newcomer only waits in line,
-and nobody can send commands as the holder, on the open router too.
+the router's job, `asibot.access`): while another of the same or a higher priority holds a
+part, a newcomer only waits in line; a newcomer of higher priority (any name but nav's) takes
+the base from nav, as a person's joystick must. Nobody can send commands as the holder, on the
+open router too.
 """
 
 from __future__ import annotations
