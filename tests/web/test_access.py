@@ -377,6 +377,30 @@ def test_the_emergency_stop_stays_on_screen_however_far_the_page_scrolls(page, s
         screenshot(page, "estop-phone")
 
 
+@pytest.mark.parametrize("size", [(1280, 800), (1024, 768), (820, 1180), (390, 844)],
+                         ids=["laptop", "tablet-landscape", "tablet", "phone"])
+def test_a_robots_card_is_two_lines_and_a_stop_adds_none(page, kitchen, released, size):
+    """The bar leaves the page its room: a card is the robot's name and lamps, then its buttons on
+    one line (wider than a phone), with Release's room kept beside Command, so a stop adds no line
+    and moves nothing. (On a tablet each card was four lines, one kept empty for Release.)"""
+    page.set_viewport_size({"width": size[0], "height": size[1]})
+    card = page.locator(f".robot-card[data-robot={ROBOT}]")
+    tops = "(buttons) => buttons.map((b) => Math.round(b.getBoundingClientRect().top))"
+    before, top = card.bounding_box(), view_top(page)
+    page.locator("#estop").click()
+    release = card.get_by_role("button", name=f"Release emergency stop of {ROBOT}")
+    release.wait_for(state="visible", timeout=10000)
+    command = card.get_by_role("button", name=f"Commanding {ROBOT}")
+    assert release.bounding_box()["y"] == command.bounding_box()["y"]      # beside Command
+    assert card.bounding_box() == before and view_top(page) == top        # nothing grew or moved
+    if size[0] >= 700:
+        assert len(set(card.locator("button").evaluate_all(tops))) == 1   # one line of buttons
+    screenshot(page, f"card-stopped-{size[0]}x{size[1]}")
+    release.click()
+    release.wait_for(state="hidden", timeout=10000)
+    assert card.bounding_box() == before
+
+
 def test_resting_the_pointer_on_a_task_launches_it_and_passing_over_it_chooses_nothing(page, kitchen, task):
     """Dwell to choose, for eye-gaze or a head pointer (which move the mouse pointer)."""
     # 2 s: a slow machine between two moves of the pointer is never taken for a rest.

@@ -56,20 +56,12 @@ def _still(truth: Inbox) -> bool:
 def _base_page(browser, apartment):
     """A page on the Base tab, once nav is localised, and its status line; it must raise no
     script error."""
-    page = browser.new_page(viewport={"width": 1366, "height": 1000})
-    errors: list[str] = []
-    page.on("pageerror", lambda e: errors.append(str(e)))
-    try:
-        page.goto(apartment.web_url + "#base")
-        page.wait_for_selector("body[data-ready=true]")
+    with fresh_page(browser, apartment.web_url + "#base", robots=("pioneer-sim",), size=(1366, 1000)) as page:
         page.get_by_text("This page drives pioneer-sim").wait_for(timeout=20000)
         status = page.locator(".nav-status")
         wait_until(lambda: "not sure" not in status.inner_text() and "Waiting" not in status.inner_text(),
                    timeout=30, message="nav never localised")
         yield page, status
-    finally:
-        page.close()
-    assert not errors, errors
 
 
 def test_the_base_page_drives_the_pioneer_and_sends_it_where_the_map_is_tapped(browser, apartment):

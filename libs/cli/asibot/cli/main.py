@@ -18,6 +18,7 @@ from typing import Any, Callable
 
 from asibot import access, keys
 from asibot.safety import estop
+from asibot.cli import doctor
 from asibot.cli import foxglove as foxglovecli
 from asibot.cli import nav as navcli
 from asibot.bus import DEFAULT_ROUTER, ROUTER_ENV, Bus, open_router, router_endpoint
@@ -573,6 +574,7 @@ def build_parser() -> argparse.ArgumentParser:
         rf.set_defaults(func=func)
 
     navcli.add_parser(sub)
+    doctor.add_parser(sub)
 
     rc = sub.add_parser("recordings", help="list recordings with duration, topics and counts")
     rc.add_argument("dir", nargs="?",

@@ -23,7 +23,21 @@ function card(robot) {
     lamp('Controller', robot.controller ? 'on' : 'off', robot.controller ? 'kinematics alive' : 'kinematics not running'),
     when(engaged, lamp('STOPPED', 'alarm', engaged ? robot.estop.reason : '')),
     robot.fault ? lamp('FAULT', 'alarm', robot.fault) : null);
-  const actions = [];
+  // Its room is kept beside Command: a Release that comes moves nothing and adds no line.
+  const release = when(engaged, el('button', {
+    type: 'button', class: 'release', 'aria-label': `Release emergency stop of ${robot.id}`,
+    title: 'Release the emergency stop: nothing moves until you ask it to',
+    onclick: () => attempt(() => api.post(paths.robot.release(robot.id)),
+      `${robot.id}: emergency stop released. Nothing moves until you ask it to.`),
+  }, 'Release'));
+  const actions = [
+    // The name holds the word on the button (WCAG 2.5.3, label in name) and the robot's id.
+    el('button', {
+      type: 'button', 'aria-pressed': chosen ? 'true' : 'false', 'aria-label': `${chosen ? 'Commanding' : 'Command'} ${robot.id}`,
+      onclick: () => choose(robot.id),
+    }, chosen ? 'Commanding' : 'Command'),
+    release,
+  ];
   if (robot.world) {
     // Simulation only: after a test run the can lies on the floor; one button puts it back.
     actions.push(el('button', {
@@ -32,27 +46,18 @@ function card(robot) {
         `${robot.id}: the ${robot.world} is back as it started.`),
     }, `Put the ${robot.world} back`));
   }
-  actions.push(when(engaged, el('button', {
-    type: 'button', 'aria-label': `Release emergency stop of ${robot.id}`,
-    onclick: () => attempt(() => api.post(paths.robot.release(robot.id)),
-      `${robot.id}: emergency stop released. Nothing moves until you ask it to.`),
-  }, 'Release emergency stop')));
   if (robot.fault) {
     actions.push(el('button', {
       type: 'button', 'aria-label': `Reset fault of ${robot.id}`,
       onclick: () => attempt(() => api.post(paths.robot.resetFault(robot.id)), `${robot.id}: fault cleared.`),
     }, 'Reset fault'));
   }
+  // Two lines whatever comes and goes: who it is and its lamps, then what can be done with it.
   return el('div', { class: `robot-card${chosen ? ' chosen' : ''}`, dataset: { robot: robot.id } },
-    el('span', {}, el('span', { class: 'name' }, robot.id),
-      el('span', { class: 'kind' }, `${robot.simulated ? 'simulated' : 'real'} ${robot.arm || ''} ${robot.has_base ? '+ base' : ''}`)),
-    lamps,
-    // The name holds the word on the button (WCAG 2.5.3, label in name) and the robot's id.
-    el('button', {
-      type: 'button', 'aria-pressed': chosen ? 'true' : 'false', 'aria-label': `${chosen ? 'Commanding' : 'Command'} ${robot.id}`,
-      onclick: () => choose(robot.id),
-    }, chosen ? 'Commanding' : 'Command'),
-    // Its own line, always there: a Release or Reset fault button that comes moves nothing else.
+    el('div', { class: 'card-head' },
+      el('span', { class: 'who' }, el('span', { class: 'name' }, robot.id),
+        el('span', { class: 'kind' }, `${robot.simulated ? 'simulated' : 'real'} ${robot.arm || ''} ${robot.has_base ? '+ base' : ''}`)),
+      lamps),
     el('div', { class: 'card-actions' }, actions));
 }
 

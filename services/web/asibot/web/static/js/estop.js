@@ -1,4 +1,4 @@
-// The emergency stop: the red button at the top and the Esc key; beside it, while a robot is
+// The emergency stop: the red button at the top and the Esc key; next to it, while a robot is
 // stopped, "Release all".
 //
 // The rule for Esc (the Home page's Safety text says it to the person, in these words):
@@ -34,7 +34,7 @@ export function releaseAll() {
 }
 
 // The bar at the top says, for as long as it lasts, which robots are stopped; "Release all" is
-// beside the stop (its room kept while nothing is stopped, so nothing jumps when it comes).
+// next to the stop (its room kept while nothing is stopped, so nothing jumps when it comes).
 function showStopped(button) {
   const header = document.querySelector('header.top');
   let last = null;

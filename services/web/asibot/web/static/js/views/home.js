@@ -52,7 +52,7 @@ export default {
       el('section', { class: 'panel' },
         el('h2', {}, 'Safety'),
         el('p', {}, 'The red Emergency stop button at the top, or the Esc key, stops every robot and the running program at once; ',
-          'with switch scanning, so do two quick taps of the switch. Release all, beside it, lets them move again; ',
+          'with switch scanning, so do two quick taps of the switch. Release all, next to it, lets them move again; ',
           'nothing moves until you ask it to.'),
         el('p', { id: 'esc-rule' }, 'The Esc key: one Esc stops. In a text field or the program editor, or when Esc closes something ',
           '(the editor\'s list of completions, its search box, a name being changed), the first Esc only does that and the ',
