@@ -44,11 +44,13 @@ def test_startup_of_node_1_is_byte_exact(rig):
     assert "2b 00 18 03 2c 01 00 00" in requests          # TPDO1 inhibit 30 ms = 300 x 100 us
     assert "2b 00 18 05 fa 00 00 00" in requests          # TPDO1 event timer 250 ms
     assert "23 02 16 01 20 00 7a 60" in requests          # RPDO3 carries 0x607A target position
-    assert requests[-6:] == [
+    assert requests[-8:] == [
         "2f c2 60 01 0a 00 00 00",   # interpolation period 10 ...
         "2f c2 60 02 fd 00 00 00",   # ... x 10^-3 s
         "2f 60 60 00 08 00 00 00",   # mode CSP
         "2b 17 10 00 64 00 00 00",   # heartbeat producer 100 ms
+        "23 16 10 01 2c 01 7f 00",   # heartbeat consumer: node 127 (the master) within 300 ms
+        "2b 07 60 00 03 00 00 00",   # abort connection option: quick stop
         "40 64 60 00 00 00 00 00",   # read position actual before enabling ...
         "23 7a 60 00 00 00 00 00",   # ... and make it the target, so nothing jumps
     ]
@@ -67,12 +69,15 @@ def test_target_position_rpdo_and_sync(rig):
         m.configure(node)
         m.start(node)
         m.enable(node)
-    rig.sniffer.clear()
+    m.start_cyclic()
     q2 = rig.cfg.joints[1].units.to_counts(math.radians(10))
     assert q2 == 18204                         # 10 deg x 1820.44 counts/deg
     m.cycle({1: 0, 2: q2})
-    wait_until(lambda: frames(rig, 0x402, 0x080))
-    assert frames(rig, 0x401, 0x402, 0x080) == [(0x401, "00 00 00 00"), (0x402, "1c 47 00 00"), (0x080, "")]
+    rig.sniffer.clear()
+    # Set-points and SYNC repeat every period without further calls; the master's heartbeat too.
+    wait_until(lambda: len(frames(rig, 0x080)) >= 3 and frames(rig, 0x77F))
+    assert set(frames(rig, 0x401, 0x402, 0x080, 0x77F)) == {
+        (0x401, "00 00 00 00"), (0x402, "1c 47 00 00"), (0x080, ""), (0x77F, "05")}
     # The drive answers the SYNC with TPDO3: position internal (i32) + torque (i16).
     wait_until(lambda: frames(rig, 0x382))
     assert len(bytes.fromhex(frames(rig, 0x382)[0][1].replace(" ", ""))) == 6

@@ -15,6 +15,7 @@ from typing import Any
 import yaml
 
 from asibot import robots
+from asibot.arm_driver import objects
 from asibot.arm_driver.pdo import Entry, Layout
 from asibot.arm_driver.units import Units
 
@@ -53,6 +54,12 @@ class ArmConfig:
     profile_acceleration: float   # rad/s^2
     joints: list[Joint]
     pdos: dict[str, Layout] = field(default_factory=dict)
+    # The master's own node on the bus (ours): it produces a heartbeat on 0x700 + master_node,
+    # which every drive consumes (0x1016) and acts on by 0x6007 when it stops.
+    master_node: int = 127
+    master_heartbeat_ms: int = 100
+    drive_consumer_ms: int = 300
+    connection_loss: str = "quick_stop"
 
     @property
     def names(self) -> list[str]:
@@ -166,6 +173,7 @@ def parse(raw: Any, spec: robots.RobotSpec, source: str = "config") -> ArmConfig
         raise ConfigError(f"{source}: control_rate_hz {rate} is above 1000; a SYNC period under 1 ms "
                           "cannot carry 5 drives at 1 Mbit/s")
     hb = int(_number(raw, "heartbeat_ms", source))
+    master = _master(raw, joints, source)
     return ArmConfig(
         robot=spec.robot_id,
         bitrate=int(_number(raw, "bitrate", source)),
@@ -176,4 +184,30 @@ def parse(raw: Any, spec: robots.RobotSpec, source: str = "config") -> ArmConfig
         state_timeout_s=_number(raw, "state_timeout_s", source),
         profile_velocity=math.radians(_number(raw, "profile_velocity_deg_s", source)),
         profile_acceleration=math.radians(_number(raw, "profile_acceleration_deg_s2", source)),
-        joints=joints, pdos=pdos)
+        joints=joints, pdos=pdos, **master)
+
+
+def _master(raw: dict, joints: list[Joint], source: str) -> dict[str, Any]:
+    """The master's heartbeat and what the drives do when it stops (optional keys; defaults ours)."""
+    node = raw.get("master_node", 127)
+    if isinstance(node, bool) or not isinstance(node, int) or not 1 <= node <= 127:
+        raise ConfigError(f"{source}: master_node must be a CANopen node id 1..127, got {node!r}")
+    if node in [j.node for j in joints]:
+        raise ConfigError(f"{source}: master_node {node} is also a drive's node; pick a free id (127 is ours)")
+    # The heartbeat COB-ID must not be a frame an absolute encoder board sends or listens on.
+    board_ids = {j.absolute.can_id + off for j in joints if j.absolute for off in (0, 0x80, 0x100, 0x180)}
+    if 0x700 + node in board_ids:
+        raise ConfigError(f"{source}: master_node {node}: its heartbeat COB-ID 0x{0x700 + node:03X} is used by "
+                          "an absolute encoder board")
+    producer = int(_number(raw, "master_heartbeat_ms", source)) if "master_heartbeat_ms" in raw else 100
+    consumer = int(_number(raw, "drive_consumer_ms", source)) if "drive_consumer_ms" in raw else 3 * producer
+    if not producer < consumer <= 0xFFFF:
+        raise ConfigError(f"{source}: drive_consumer_ms ({consumer}) must exceed master_heartbeat_ms ({producer}) "
+                          "and fit 16 bits: a drive that waits less than one heartbeat period stops on time; "
+                          "3 periods is ours")
+    loss = raw.get("connection_loss", "quick_stop")
+    if loss not in objects.CONNECTION_LOSS:
+        raise ConfigError(f"{source}: connection_loss must be one of {', '.join(objects.CONNECTION_LOSS)} "
+                          f"(0x6007), got {loss!r}")
+    return {"master_node": node, "master_heartbeat_ms": producer, "drive_consumer_ms": consumer,
+            "connection_loss": loss}

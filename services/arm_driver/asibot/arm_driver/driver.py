@@ -20,7 +20,7 @@ from typing import Callable
 from asibot.arm_driver import emcy, objects
 from asibot.arm_driver.cia402 import State
 from asibot.arm_driver.config import ArmConfig
-from asibot.arm_driver.master import CanopenMaster, DriveError, Feedback
+from asibot.arm_driver.master import CanopenMaster, DriveError, Feedback, LoopStalled
 from asibot.arm_driver.motion import JointReference
 from asibot.safety.arming import Arming
 from asibot.messages import ArmState
@@ -218,6 +218,8 @@ class ArmDriver:
     # ------------------------------------------------------------ the control thread
     def _run(self) -> None:
         try:
+            # SYNC and the heartbeat first: each drive enabled below is then never without them.
+            self.master.start_cyclic()
             self._bring_up(self.config.nodes)
         except DriveError as exc:
             self._enter_fault("startup", 0, str(exc))
@@ -233,12 +235,16 @@ class ArmDriver:
     def _bring_up(self, nodes: list[int]) -> None:
         # No NMT reset first: it would restart a drive's position counter, and q1/q5 have no
         # absolute encoder to recover it from (docs/canopen.md, "Absolute encoders"). Configuring
-        # is idempotent.
-        for node in nodes:
-            self.master.configure(node)
-            self.master.start(node)
-        for node in self.config.nodes:
-            self.master.enable(node)
+        # is idempotent. Every drive is configured before any is enabled, so that a drive that
+        # cannot be configured (an encoder without an angle) leaves the arm off. SYNC and each
+        # enabled drive's held set-point keep flowing meanwhile (the periodic sender's).
+        with self.master.bringing_up():
+            for node in nodes:
+                self.master.configure(node)
+                self.master.start(node)
+            for node in self.config.nodes:
+                self.master.enable(node)
+                self._up.add(node)      # enabled: a fault from here on quick-stops it
         fb = self.master.snapshot()
         with self._lock:
             self._feedback = fb
@@ -249,6 +255,10 @@ class ArmDriver:
         log.info("drives enabled in %s", ", ".join(sorted({MODE_NAMES[m] for m in self.master.modes.values()})))
 
     def _tick(self) -> None:
+        try:
+            self.master.pulse()
+        except LoopStalled as exc:
+            self._enter_fault("loop_stalled", 0, str(exc))
         now = time.monotonic()
         fb = self.master.snapshot()
         with self._lock:
@@ -332,13 +342,16 @@ class ArmDriver:
             self.ref.hold()
         self.counters["faults"] += 1
         if first:
-            for n in sorted(self._up):
-                try:
-                    self.master.quick_stop(n)
-                except DriveError:
-                    self.counters["tx_errors"] += 1
+            self._quick_stop_all()
         log.error("%s", sentence)
         self.on_event("error", code, sentence)
+
+    def _quick_stop_all(self) -> None:
+        for n in sorted(self._up):
+            try:
+                self.master.quick_stop(n)
+            except DriveError:
+                self.counters["tx_errors"] += 1
 
     def _watchdog(self, now: float) -> None:
         with self._lock:
@@ -373,6 +386,7 @@ class ArmDriver:
             with self._lock:
                 self.fault = str(exc)
                 self._faulted = True
+            self._quick_stop_all()      # the drives this reset enabled before it failed
             result.append(exc)
         finally:
             done.set()
@@ -385,6 +399,7 @@ class ArmDriver:
         lost = [j.node for j in self.joints
                 if j.node not in self._up or fb[j.node].booted or self._silent(fb[j.node], fb, now)]
         log.info("resetting the fault; re-initialising drives %s", lost or "none")
+        self.master.start_cyclic()      # again, if the loop guard had stopped SYNC and the heartbeat
         self._bring_up(lost)
         self.master.snapshot()          # the error-reset EMCYs of this reset are not news
         with self._lock:

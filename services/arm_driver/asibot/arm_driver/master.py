@@ -6,17 +6,23 @@ CiA 402 enable handshake, per-cycle RPDO + SYNC, and bus-off detection from erro
 failed writes. Start-up follows TechnosoftIpos' initialize() (docs/canopen.md, "Start-up"): ping,
 absolute encoder sync (a joint with an absolute encoder gets its position counter set from
 it), software limits, profile velocity/acceleration, TPDO/RPDO mapping, heartbeat producer,
-NMT start, then shutdown -> switch on -> enable operation.
+heartbeat consumer of the master's heartbeat and connection-loss option, NMT start, then
+shutdown -> switch on -> enable operation.
+
+SYNC, the master's heartbeat and the CSP set-points are repeated by the interface's periodic
+sender (asibot.arm_driver.cyclic): the control loop updates set-points in place, so neither a
+busy loop nor a drive being reset stops the others' SYNC.
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 import math
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import can
@@ -26,6 +32,7 @@ from canopen.objectdictionary import ObjectDictionary
 from asibot.arm_driver import cia402, cui, objects
 from asibot.arm_driver.cia402 import State
 from asibot.arm_driver.config import ArmConfig, Joint
+from asibot.arm_driver.cyclic import SYNC_COB_ID, CyclicFrames, LoopFrames, PeriodicFrames
 from asibot.arm_driver.emcy import Emcy
 from asibot.arm_driver.pdo import ON_CHANGE, PDO_INVALID, Layout
 
@@ -34,11 +41,21 @@ log = logging.getLogger(__name__)
 CAN_ERR_BUSOFF = 0x00000040
 CAN_ERR_RESTARTED = 0x00000100
 NMT_START = 0x01
-SYNC_COB_ID = 0x080
+NMT_OPERATIONAL = 0x05
+SYNC_MODES = ("periodic", "loop")
+#: s without a control period (outside a bring-up, whose calls have their own time-outs) after
+#: which the loop is taken as hung: the periodic sender would otherwise keep the drives holding
+#: on their last set-points for ever, deaf to the estop. Well above the stalls a loaded machine
+#: makes (~0.1 s), so a busy machine does not stop the arm.
+LOOP_STALL_S = 1.0
 
 
 class DriveError(Exception):
     """A drive could not be brought up or commanded; the message is a sentence for the user."""
+
+
+class LoopStalled(DriveError):
+    """The control loop itself stalled (LOOP_STALL_S): the drives stopped by themselves."""
 
 
 @dataclass
@@ -80,9 +97,16 @@ class _ErrorFrames(can.Listener):
 
 
 class CanopenMaster:
-    """One CAN bus, the drives of one arm."""
+    """One CAN bus, the drives of one arm.
 
-    def __init__(self, bus: can.BusABC, config: ArmConfig) -> None:
+    `sync="periodic"` (the default) has the interface's periodic sender repeat SYNC, the
+    heartbeat and the set-points; `"loop"` sends them from cycle(), as before issue 29 (kept to
+    measure against, bench/bench_sync.py).
+    """
+
+    def __init__(self, bus: can.BusABC, config: ArmConfig, sync: str = "periodic") -> None:
+        if sync not in SYNC_MODES:
+            raise ValueError(f"sync must be one of {', '.join(SYNC_MODES)}, got {sync!r}")
         self.config = config
         self.bus = bus
         self.network = canopen.Network(bus)
@@ -111,6 +135,14 @@ class CanopenMaster:
                 if layout.kind == "tpdo":
                     self.network.subscribe(layout.cob_id(j.node), functools.partial(self._on_tpdo, j.node, layout))
         self.network.connect()
+        self.frames: CyclicFrames = PeriodicFrames(bus) if sync == "periodic" else LoopFrames(self._send)
+        # The loop's pulse, watched by a guard thread while the periodic sender runs.
+        self._ticked = time.monotonic()
+        self._bringing_up = 0
+        self.stalled = 0.0                      # s the loop had stalled when the guard stopped the drives
+        self._stall_told = False
+        self._guard_stop = threading.Event()
+        self._guard: threading.Thread | None = None
 
     # ------------------------------------------------------------ receive side (notifier thread)
     def _on_tpdo(self, node: int, layout: Layout, cob_id: int, data: bytearray, ts: float) -> None:
@@ -200,13 +232,82 @@ class CanopenMaster:
         self._send(rpdo1.cob_id(node), rpdo1.encode({objects.CONTROLWORD: cw}))
         self._last_cw[node] = cw
 
+    def start_cyclic(self) -> None:
+        """Start the master's heartbeat and SYNC; they run until close(), through fault resets
+        (again after the guard stopped them: a reset_fault calls this)."""
+        with self._lock:
+            self._ticked, self.stalled, self._stall_told = time.monotonic(), 0.0, False
+        if isinstance(self.frames, PeriodicFrames) and self._guard is None:
+            self._guard = threading.Thread(target=self._guard_loop, name="canopen-loop-guard", daemon=True)
+            self._guard.start()
+        try:
+            self.frames.put(0x700 + self.config.master_node, bytes([NMT_OPERATIONAL]),
+                            self.config.master_heartbeat_ms / 1000.0)
+            self.frames.put(SYNC_COB_ID, b"", self.config.period)
+        except (can.CanError, OSError) as exc:
+            raise DriveError(f"The CAN adapter refuses to send periodic frames ({exc}): check the cable, "
+                             "then call reset_fault.") from exc
+
+    def stop_cyclic(self) -> None:
+        """Stop SYNC, the heartbeat and every set-point: what the drives see when the master dies."""
+        self.frames.close()
+
+    @contextlib.contextmanager
+    def bringing_up(self) -> Iterator[None]:
+        """Configuring and enabling drives blocks the control loop for up to their own time-outs
+        (SDO, state changes): the guard does not count that as a stall."""
+        with self._lock:
+            self._bringing_up += 1
+        try:
+            yield
+        finally:
+            with self._lock:
+                self._bringing_up -= 1
+                self._ticked = time.monotonic()
+
+    def pulse(self) -> None:
+        """The control loop is alive: called first in each period. Raises LoopStalled once after
+        the guard found the loop hung (before what the drives reported meanwhile is read)."""
+        with self._lock:
+            self._ticked = time.monotonic()
+            tell = bool(self.stalled) and not self._stall_told
+            self._stall_told = self._stall_told or tell
+        if tell:
+            raise LoopStalled(f"The arm driver's control loop stalled for {self.stalled:.1f} s, so its heartbeat "
+                              "was stopped and the drives stopped by themselves: see the driver's log, then call "
+                              "reset_fault.")
+
+    def _guard_loop(self) -> None:
+        """A control loop that stops (a deadlock, a hung call) stops the periodic frames, so each
+        drive quick-stops by itself once its heartbeat consumer time has passed; the loop, if it
+        comes back, faults with a sentence (cycle)."""
+        while not self._guard_stop.wait(LOOP_STALL_S / 10):
+            with self._lock:
+                quiet = time.monotonic() - self._ticked
+                hung = quiet > LOOP_STALL_S and not self._bringing_up and not self.stalled
+                if hung:
+                    self.stalled = quiet
+            if hung:
+                log.error("the control loop has not run for %.1f s: stopping SYNC and the heartbeat, the drives "
+                          "stop by themselves", quiet)
+                self.frames.close()
+
+    def _hold(self, node: int, counts: int) -> None:
+        """The CSP set-point the periodic sender repeats for `node`, changed in place."""
+        rpdo3 = self.config.pdos["rpdo3"]
+        self.frames.put(rpdo3.cob_id(node), rpdo3.encode({objects.TARGET_POSITION: counts}), self.config.period)
+
     def cycle(self, targets: dict[int, int]) -> None:
-        """One control period: each drive's set-point, then SYNC (drives apply and answer on SYNC)."""
+        """One control period: each drive's set-point (in place for CSP: sent with every SYNC)."""
+        if self.frames.error:      # a periodic sender failed since the last period (taken: reported once)
+            self.tx_error, self.frames.error = self.frames.error, ""
+            raise DriveError(f"The CAN adapter refuses to send ({self.tx_error}); the bus may be off or "
+                             "unplugged: check the cable and termination, then call reset_fault.")
         rpdo3 = self.config.pdos["rpdo3"]
         for node, counts in targets.items():
             mode = self.modes.get(node)
             if mode == objects.MODE_CSP:
-                self._send(rpdo3.cob_id(node), rpdo3.encode({objects.TARGET_POSITION: counts}))
+                self._hold(node, counts)
             elif mode == objects.MODE_PROFILE_POSITION and counts != self._last_target.get(node):
                 # Profile position: new target, then a rising edge of "new set-point" with
                 # "change set immediately", then clear the bit for the next edge.
@@ -215,7 +316,7 @@ class CanopenMaster:
                 self.controlword(node, base | cia402.CW_NEW_SETPOINT)
                 self.controlword(node, base)
             self._last_target[node] = counts
-        self._send(SYNC_COB_ID, b"")
+        self.frames.tick()
 
     # ------------------------------------------------------------ SDO helpers
     def _joint(self, node: int) -> Joint:
@@ -253,6 +354,9 @@ class CanopenMaster:
     def configure(self, node: int) -> int:
         """SDO configuration and PDO mapping of one drive (pre-operational); returns the mode chosen."""
         cfg, joint = self.config, self._joint(node)
+        # This drive is being reset on its own: its set-point stops (it is remapped, and its
+        # counter may have restarted) while the others keep theirs and SYNC.
+        self.frames.drop(cfg.pdos["rpdo3"].cob_id(node))
         self.read(node, objects.DEVICE_TYPE)                        # SDO ping
         if joint.absolute is not None and self._counter_may_be_stale(node):
             self.sync_absolute(joint)
@@ -277,6 +381,10 @@ class CanopenMaster:
             self.write(node, objects.INTERPOLATION_PERIOD, 2, -3)
         self.write(node, objects.MODES, 0, mode)
         self.write(node, objects.HEARTBEAT_PRODUCER, 0, cfg.heartbeat_ms)
+        # The drive watches the master's heartbeat and stops by itself when it misses it (a dead
+        # master or a pulled cable; CiA 301 0x1016, CiA 402 0x6007).
+        self.write(node, objects.HEARTBEAT_CONSUMER, 1, cfg.master_node << 16 | cfg.drive_consumer_ms)
+        self.write(node, objects.ABORT_CONNECTION, 0, objects.CONNECTION_LOSS[cfg.connection_loss])
         with self._lock:
             fb = self.feedback[node]
             fb.booted = False
@@ -386,6 +494,8 @@ class CanopenMaster:
         state = self.wait_state(node, set(State) - {State.NOT_READY_TO_SWITCH_ON}, timeout)
         here = self.read(node, objects.POSITION_ACTUAL)
         self.write(node, objects.TARGET_POSITION, 0, here)
+        if self.modes.get(node) == objects.MODE_CSP:
+            self._hold(node, here)      # SYNC applies the RPDO, not the SDO: it must say the same
         self._last_target[node] = here
         with self._lock:
             self.feedback[node].position = here
@@ -416,6 +526,8 @@ class CanopenMaster:
         self.controlword(node, cia402.QUICK_STOP)
 
     def close(self) -> None:
+        self._guard_stop.set()
+        self.stop_cyclic()
         try:
             self.network.disconnect()
         except Exception:   # the bus may already be gone; closing must not fail

@@ -52,6 +52,7 @@ U32, I32 = ObjectType(32, False), ObjectType(32, True)
 DEVICE_TYPE = 0x1000
 ERROR_REGISTER = 0x1001
 MANUFACTURER_STATUS = 0x1002      # iPOS: low word = statusword, high word = MSR
+HEARTBEAT_CONSUMER = 0x1016      # sub n: (producer node << 16) | time in ms (CiA 301)
 HEARTBEAT_PRODUCER = 0x1017
 IDENTITY = 0x1018
 RPDO_COMM, RPDO_MAP = 0x1400, 0x1600
@@ -59,6 +60,7 @@ TPDO_COMM, TPDO_MAP = 0x1800, 0x1A00
 MOTION_ERROR = 0x2000             # MER
 DETAILED_ERROR = 0x2002           # DER
 SET_ACTUAL_POSITION = 0x2081      # iPOS: overwrite the position counter (absolute encoder sync)
+ABORT_CONNECTION = 0x6007        # CiA 402 abort connection option code: what a drive does on a lost master
 CONTROLWORD = 0x6040
 STATUSWORD = 0x6041
 MODES = 0x6060
@@ -81,7 +83,7 @@ _TYPES: dict[int | tuple[int, int], ObjectType] = {
     VELOCITY_ACTUAL: I32, TORQUE_ACTUAL: I16, TARGET_POSITION: I32, SOFTWARE_LIMITS: I32,
     PROFILE_VELOCITY: U32, PROFILE_ACCELERATION: U32, SET_ACTUAL_POSITION: I32,
     (INTERPOLATION_PERIOD, 1): U8, (INTERPOLATION_PERIOD, 2): I8, SUPPORTED_MODES: U32,
-    (IDENTITY, 0): U8,
+    (IDENTITY, 0): U8, (HEARTBEAT_CONSUMER, 0): U8, HEARTBEAT_CONSUMER: U32, ABORT_CONNECTION: I16,
 }
 for _n in range(4):
     _TYPES.update({(RPDO_COMM + _n, 1): U32, (RPDO_COMM + _n, 2): U8,
@@ -103,6 +105,9 @@ def type_of(index: int, subindex: int = 0) -> ObjectType:
 def known(index: int, subindex: int = 0) -> bool:
     return (index, subindex) in _TYPES or index in _TYPES
 
+
+# 0x6007 values (CiA 402): 0 no action, 1 fault signal, 2 disable voltage, 3 quick stop.
+CONNECTION_LOSS = {"none": 0, "fault": 1, "disable_voltage": 2, "quick_stop": 3}
 
 # Bits of 0x6502 "supported drive modes" (CiA 402): bit 0 profile position, bit 7 CSP.
 MODE_PROFILE_POSITION = 1

@@ -2,8 +2,9 @@
 
 It behaves like the iPOS drives of the ASIBOT as far as the master can see: NMT, an expedited
 SDO server over its object dictionary, PDOs mapped at run time, SYNC-cyclic and event-driven
-TPDOs with inhibit and event timers, heartbeats, the CiA 402 state machine, cyclic synchronous
-position and profile position, software position limits, and injectable faults. It has no
+TPDOs with inhibit and event timers, heartbeats, a heartbeat consumer (0x1016) that acts on a
+lost master by its abort connection option code (0x6007), the CiA 402 state machine, cyclic
+synchronous position and profile position, software position limits, and injectable faults. It has no
 dynamics: the joint follows its set-point at up to `max_speed` (torque actual reads 0).
 """
 
@@ -98,10 +99,17 @@ class EmulatedDrive:
         self._last_motion: float | None = None
         self._last_sync: float | None = None
         self._last_heartbeat = -1e9
+        # CiA 301: consumer monitoring starts with the first heartbeat heard, and stops after
+        # one timeout event until the producer is heard again.
+        self._master_heard: float | None = None
+        self.connection_losses = 0
         self._limit_hit = False
         self.od: dict[tuple[int, int], int] = {
             (objects.DEVICE_TYPE, 0): 0x00020192,      # CiA 402, servo drive
             (objects.HEARTBEAT_PRODUCER, 0): 0,
+            (objects.HEARTBEAT_CONSUMER, 0): 1,        # one consumer entry
+            (objects.HEARTBEAT_CONSUMER, 1): 0,        # off until the master configures it
+            (objects.ABORT_CONNECTION, 0): 1,          # fault signal until configured
             (objects.MODES, 0): 0,
             (objects.TARGET_POSITION, 0): 0,
             (objects.SOFTWARE_LIMITS, 0): 2,
@@ -219,8 +227,36 @@ class EmulatedDrive:
                     self._send_tpdo(pdo, now)
         return self._flush()
 
+    def heard_heartbeat(self, producer: int, now: float) -> list[Frame]:
+        """A heartbeat of node `producer` was on the bus."""
+        watched, time_ms = self._consumer()
+        if time_ms and producer == watched:
+            self._master_heard = now
+        return self._flush()
+
+    def _consumer(self) -> tuple[int, int]:
+        entry = self.od[(objects.HEARTBEAT_CONSUMER, 1)]
+        return (entry >> 16) & 0xFF, entry & 0xFFFF
+
+    def _watch_master(self, now: float) -> None:
+        watched, time_ms = self._consumer()
+        if not time_ms or self._master_heard is None or now - self._master_heard <= time_ms / 1000.0:
+            return
+        self._master_heard = None
+        self.connection_losses += 1
+        # EMCY 0x8130 heartbeat error, error register: generic + communication (CiA 301).
+        self._outbox.append((EMCY_BASE + self.node, Emcy(0x8130, 0x11, b"").encode()))
+        option = self.od[(objects.ABORT_CONNECTION, 0)]
+        if option == objects.CONNECTION_LOSS["fault"]:
+            self._enter(State.FAULT)
+        elif option == objects.CONNECTION_LOSS["disable_voltage"]:
+            self._enter(cia402.transition(self.state, cia402.DISABLE_VOLTAGE, self.controlword))
+        elif option == objects.CONNECTION_LOSS["quick_stop"]:
+            self._enter(cia402.transition(self.state, cia402.QUICK_STOP, self.controlword))
+
     def poll(self, now: float) -> list[Frame]:
-        """Time passes: heartbeat, profile-position motion, event-driven TPDOs."""
+        """Time passes: heartbeat, the master's heartbeat watched, profile-position motion, event-driven TPDOs."""
+        self._watch_master(now)
         period = self.od[(objects.HEARTBEAT_PRODUCER, 0)] / 1000.0
         if period > 0 and not self.heartbeat_lost and now - self._last_heartbeat >= period:
             self._last_heartbeat = now
@@ -388,6 +424,8 @@ class EmulatedDrive:
             return self._pdo_write(pdo, index, sub, value)
         if (index, sub) not in self.od:
             return ABORT_NO_SUBINDEX
+        if (index, sub) == (objects.HEARTBEAT_CONSUMER, 0):
+            return ABORT_READ_ONLY              # the number of entries is fixed
         if index == objects.MODES:
             if value not in (0, objects.MODE_PROFILE_POSITION) and not (value == objects.MODE_CSP and self.supports_csp):
                 return ABORT_VALUE_RANGE

@@ -145,8 +145,14 @@ class DriveEmulator:
     # ------------------------------------------------------------ the loop
     def _run(self) -> None:
         while not self._stop.is_set():
+            # Everything queued is read before time advances for the drives, so that a stall of
+            # this thread does not make a heartbeat still in the queue look missing.
+            received: list[can.Message] = []
             try:
                 msg = self.bus.recv(timeout=POLL_S)
+                while msg is not None:
+                    received.append(msg)
+                    msg = self.bus.recv(timeout=0) if len(received) < 256 else None
             except (can.CanError, ValueError, OSError):
                 if self._stop.is_set():
                     return
@@ -160,9 +166,10 @@ class DriveEmulator:
                     if self._bus_off_reported:
                         self._bus_off_reported = False
                         self._error_frame(CAN_ERR_RESTARTED)
-                if msg is not None and not msg.is_error_frame and not msg.is_remote_frame:
-                    self.frames_in += 1
-                    self._route(msg.arbitration_id, bytes(msg.data), now)
+                for m in received:
+                    if not m.is_error_frame and not m.is_remote_frame:
+                        self.frames_in += 1
+                        self._route(m.arbitration_id, bytes(m.data), now)
                 for node, drive in self.drives.items():
                     self._send(node, drive.poll(now))
 
@@ -176,6 +183,11 @@ class DriveEmulator:
             for node, drive in self.drives.items():
                 if node not in self._silent:
                     self._send(node, drive.on_sync(now))
+            return
+        if 0x701 <= cob_id <= 0x77F:            # a heartbeat: every drive may consume it
+            for node, drive in self.drives.items():
+                if node not in self._silent:
+                    self._send(node, drive.heard_heartbeat(cob_id - 0x700, now))
             return
         for node, drive in self.drives.items():
             if node in self._silent:
