@@ -48,9 +48,10 @@ FROM ${BASE}
 # python3: the venv's interpreter. libosmesa6 libgl1 libglib2.0-0: MuJoCo's offscreen renderer
 # and OpenCV without a GPU. libgomp1: pinocchio (kinematics). espeak-ng: spoken feedback.
 # libportaudio2: a robot's own microphone. bubblewrap: the sandbox of user programs.
+# libopenni2-0: OpenNI2 depth cameras (services/camera).
 RUN apt-get update \
  && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends \
-        python3 libosmesa6 libgl1 libglib2.0-0 libgomp1 espeak-ng libportaudio2 bubblewrap \
+        python3 libosmesa6 libgl1 libglib2.0-0 libgomp1 espeak-ng libportaudio2 bubblewrap libopenni2-0 \
  && apt-get clean && rm -rf /var/lib/apt/lists/* /var/cache/apt/archives/*.deb \
  && useradd --create-home --uid 1000 --shell /usr/sbin/nologin asibot \
  && mkdir -p /app/recordings /data \

@@ -115,6 +115,15 @@ def test_serial_lines_on_this_machine(tmp_path):
     assert silent.status == FAIL and "nothing answers" in silent.says
 
 
+def test_the_katana_is_optional_and_its_line_checked_when_named(tmp_path):
+    assert doctor.katana_line(Machine(env={"ASIBOT_KATANA_PORT": ""})).status == WARN
+    device = tmp_path / "ttyUSB1"
+    device.write_text("")
+    assert doctor.katana_line(Machine(env={"ASIBOT_KATANA_PORT": str(device)})).status == OK
+    missing = doctor.katana_line(Machine(env={"ASIBOT_KATANA_PORT": str(tmp_path / "gone")}))
+    assert missing.status == FAIL and missing.check == "Katana serial line"
+
+
 def test_depth_cameras_are_found_by_their_usb_vendor(tmp_path):
     assert doctor.depth_camera(machine(tmp_path / "a", {}, usb=("1d6b",))).status == WARN   # a root hub only
     found = doctor.depth_camera(machine(tmp_path / "b", {}, usb=("1d6b", "8086", "2bc5")))

@@ -54,6 +54,25 @@ def test_the_emulated_profile_drives_both_robots(up):
     wait_until(lambda: abs(odom[-1].vx) < 1e-3, 5)
     assert odom[-1].x - x0 == pytest.approx(0.6, abs=0.12)
 
+    # The Katana on the P3-AT: an emulated controller on a pseudo-terminal, in the base driver's
+    # process under the robot's one driver contract, calibrated at start (each motor to its
+    # stopper), jogged through the kinematics service as the sim's Katana is.
+    katana: list[ArmState] = []
+    stack.bus.subscribe(keys.arm_state("pioneer"), ArmState, katana.append)
+    wait_until(lambda: katana and katana[-1].mode == "idle", 60, message="the emulated Katana never calibrated")
+    stack.wait_alive("kinematics/pioneer", timeout=30)
+    with CartesianClient() as arm:
+        arm.open("pioneer")
+        before = arm.state()["joints"]
+        arm.relj([10, 0, 0, 0, 15])            # one jog of joint 1 and the wrist (calibration leaves it low)
+        arm.wait(timeout=30)
+    # The Katana's own position loop (25 Hz over its serial line) settles after the trajectory ends.
+    goal = [before[0] + 10, before[4] + 15]
+    wait_until(lambda: abs(math.degrees(katana[-1].positions[0]) - goal[0]) < 0.5
+               and abs(math.degrees(katana[-1].positions[4]) - goal[1]) < 0.5, 10,
+               message=lambda: f"the Katana stands at {[math.degrees(q) for q in katana[-1].positions]}, not {goal}")
+    assert stack.bus.call(keys.driver_rpc("pioneer", "status"))["arm"]["serial"] == "emulated"
+
     assert stack.stop() == 130   # stopped by Ctrl-C: the shell's 128 + SIGINT
 
 

@@ -45,6 +45,32 @@ LID_PIXELS = 10
 SEARCH_PX = 3
 
 
+@dataclass(frozen=True)
+class Intrinsics:
+    """A pinhole camera's image size and focal lengths and principal point, pixels: what the
+    sim renders with and what a real camera reports (CameraInfo carries them on the bus)."""
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    @classmethod
+    def from_fovy(cls, width: int, height: int, fovy_deg: float) -> "Intrinsics":
+        if width < 2 or height < 2:
+            raise ValueError("camera resolution must be at least 2x2 pixels")
+        f = 0.5 * height / math.tan(math.radians(fovy_deg) / 2)
+        return cls(width, height, f, f, (width - 1) / 2, (height - 1) / 2)
+
+    def rays(self) -> np.ndarray:
+        """Unit ray directions, optical frame, (H*W, 3), row-major from the top-left pixel."""
+        u, v = np.meshgrid(np.arange(self.width), np.arange(self.height))
+        d = np.stack([(u - self.cx) / self.fx, (v - self.cy) / self.fy, np.ones_like(u, float)], -1)
+        return (d / np.linalg.norm(d, axis=-1, keepdims=True)).reshape(-1, 3)
+
+
 class DepthError(ValueError):
     """A touch or a calibration that the depth cannot answer; the message is the sentence."""
 

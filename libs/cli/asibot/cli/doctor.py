@@ -37,7 +37,7 @@ DEPTH_CAMERA_VENDORS = {"8086": "Intel RealSense", "045e": "Microsoft Kinect", "
 #: Below this free space the recorder fills the disk within a working day (a session records
 #: the cameras: about 1 GB an hour).
 MIN_FREE_BYTES = 4 * 1024**3
-ARM_CAN_ENV, PIONEER_PORT_ENV = "ASIBOT_ARM_CAN", "ASIBOT_PIONEER_PORT"
+ARM_CAN_ENV, PIONEER_PORT_ENV, KATANA_PORT_ENV = "ASIBOT_ARM_CAN", "ASIBOT_PIONEER_PORT", "ASIBOT_KATANA_PORT"
 
 
 @dataclass
@@ -139,6 +139,15 @@ def serial_line(m: Machine, what: str, env: str, example: str) -> Finding:
     return Finding(what, OK, f"{url} is there and this user may open it")
 
 
+def katana_line(m: Machine) -> Finding:
+    """The Pioneer's Katana, optional: the base driver serves it when its port is named."""
+    if not m.env.get(KATANA_PORT_ENV):
+        return Finding("Katana serial line", WARN, f"${KATANA_PORT_ENV} is empty: the Pioneer runs without its arm",
+                       f"export {KATANA_PORT_ENV}=/dev/serial/by-id/... (the Katana's USB-serial adapter, "
+                       "docs/hardware.md)")
+    return serial_line(m, "Katana serial line", KATANA_PORT_ENV, "/dev/ttyUSB1")
+
+
 # ---------------------------------------------------------------- cameras, sound, disk
 def depth_camera(m: Machine) -> Finding:
     """A depth camera on USB, by vendor id (perception uses the sonar alone without one)."""
@@ -146,7 +155,7 @@ def depth_camera(m: Machine) -> Finding:
     if not found:
         return Finding("depth camera", WARN, "no depth camera on USB: the Pioneer sees obstacles with its sonar alone",
                        "plug a RealSense or an OpenNI2 camera into a USB 3 port for better obstacle warnings "
-                       "and localisation; mount it and set its pose (docs/hardware.md, 'Depth camera')")
+                       "and localisation; mount it and set its pose (docs/hardware.md, 'Depth camera'; docs/cameras.md)")
     return Finding("depth camera", OK, "on USB: " + ", ".join(found))
 
 
@@ -186,6 +195,7 @@ def run_checks(profile: str, m: Machine, arm_bitrate: Callable[[], int], recorde
     if profile == "real":
         found[:0] = [can_bus(m, arm_bitrate()),
                      serial_line(m, "Pioneer serial line", PIONEER_PORT_ENV, "/dev/ttyUSB0"),
+                     katana_line(m),
                      depth_camera(m)]
         found += by_hand()
     return found

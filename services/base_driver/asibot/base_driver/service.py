@@ -1,7 +1,9 @@
 """The Zenoh glue: bus messages to BaseDriver calls, BaseState to bus messages. Nothing else.
 
 The driver contract (cmd_vel from the holder only, the estop, events, `status`,
-`reset_fault`, driver_alive) is `asibot.safety.driver_contract`'s.
+`reset_fault`, driver_alive) is `asibot.safety.driver_contract`'s. The P3-AT's Katana, when it
+has one (`--katana PORT`), is served in this process under the same contract: one robot, one
+driver, as the sim serves pioneer-sim's arm and base (`asibot.katana_driver.KatanaArm`).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import os
 from asibot import keys
 from asibot.bus import Bus
 from asibot.safety.driver_contract import DriverContract, command
+from asibot.katana_driver.service import KatanaArm
 from asibot.messages import Battery, Bumpers, Odometry, Sonar, Twist
 from asibot.runtime import Service
 
@@ -25,13 +28,15 @@ log = logging.getLogger(__name__)
 
 NAME = "base_driver"
 DEFAULT_ROBOT = "pioneer"
+KATANA_ENV = "ASIBOT_KATANA_PORT"
 
 
 class BaseDriverService(Service):
     """Publishes the base side of the driver contract for one robot id."""
 
     def __init__(self, bus: Bus, robot: str, port: str, *, baud: int = 9600, params: str | None = None,
-                 max_vx: float = DEFAULT_MAX_VX, max_wz: float = DEFAULT_MAX_WZ) -> None:
+                 max_vx: float = DEFAULT_MAX_VX, max_wz: float = DEFAULT_MAX_WZ, katana: str = "",
+                 calibrate_katana: bool = True) -> None:
         self.robot = robot
         self._odom = bus.publisher(keys.base_odom(robot), Odometry)
         self._sonar = bus.publisher(keys.base_sonar(robot), Sonar)
@@ -43,12 +48,22 @@ class BaseDriverService(Service):
                                  baud=baud, params=KNOWN[params] if params else None,
                                  max_vx=max_vx, max_wz=max_wz)
         self._angles: list[float] = []
+        self.arm: KatanaArm | None = None
+        try:
+            if katana:
+                self.arm = KatanaArm(bus, robot, katana, self.contract.event, calibrate=calibrate_katana)
+        except BaseException:
+            self.driver.close()
+            raise
+        arm = self.arm
         self.contract.serve(
-            [command("cmd_vel", self._obey, self.driver.heard)],
-            on_holder=lambda part, holder: self.driver.set_controller(holder), on_estop=self.driver.set_estop,
-            status=self.driver.status, reset_fault=self._reset_fault)
+            [command("cmd_vel", self._obey, self.driver.heard), *(arm.commands() if arm else [])],
+            on_holder=self._on_holder, on_estop=self._on_estop, status=self._status, reset_fault=self._reset_fault,
+            verbs=arm.verbs() if arm else {}, handlers=arm.handlers() if arm else {})
         self.holder = self.contract.holders["base"]
         self.driver.start()
+        if arm is not None:
+            arm.start()
 
     @property
     def not_holder(self) -> int:
@@ -58,8 +73,26 @@ class BaseDriverService(Service):
     def _obey(self, msg: Twist) -> None:
         self.driver.cmd_vel(msg.vx, msg.wz, msg.controller)
 
+    def _on_holder(self, part: str, holder: str | None) -> None:
+        if part == "base":
+            self.driver.set_controller(holder)
+        elif self.arm is not None:
+            self.arm.on_holder(part, holder)
+
+    def _on_estop(self, engaged: bool, reason: str, by: str) -> None:
+        self.driver.set_estop(engaged, reason, by)
+        if self.arm is not None:
+            self.arm.on_estop(engaged, reason, by)
+
+    def _status(self) -> dict:
+        """The base's status; with a Katana, its own under "arm"."""
+        return {**self.driver.status(), **({"arm": self.arm.status()} if self.arm else {})}
+
     def _reset_fault(self) -> dict:
-        return self.driver.reset_fault()  # refusals are RpcErrors with the driver's sentence
+        """Both parts' faults; the base's first, so that an arm that cannot be reset leaves the
+        base reset (refusals are RpcErrors with the driver's sentence)."""
+        done = self.driver.reset_fault()
+        return {**done, "arm": self.arm.reset_fault()} if self.arm else done
 
     # ------------------------------------------------------------ out
     def _publish_state(self, s: BaseState) -> None:
@@ -75,12 +108,15 @@ class BaseDriverService(Service):
     # ------------------------------------------------------------ runtime hooks
     def health(self) -> dict:
         st = self.driver.status()
-        return {"connected": st["connected"], "mode": st["mode"], "fault": st["fault"], **st["counters"],
+        arm = {f"arm_{k}": v for k, v in self.arm.health().items()} if self.arm else {}
+        return {"connected": st["connected"], "mode": st["mode"], "fault": st["fault"], **st["counters"], **arm,
                 **self.contract.health()}
 
     def close(self) -> None:
         self.contract.close()
         self.driver.close()
+        if self.arm is not None:
+            self.arm.close()
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -90,6 +126,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--params", choices=sorted(KNOWN), default=None,
                    help="force a parameter set instead of the SYNC2 subclass")
     p.add_argument("--max-vx", type=float, default=DEFAULT_MAX_VX, help="speed limit, m/s (default 0.5); a faster cmd_vel is refused")
+    p.add_argument("--katana", default=None,
+                   help="the Katana's serial port (pyserial URL, or 'emulated'), served in this process as the "
+                        f"robot's arm; default ${KATANA_ENV}; none when empty")
+    p.add_argument("--skip-katana-calibration", action="store_true",
+                   help="trust the Katana's counters: it was calibrated since it was switched on")
     p.add_argument("--max-wz", type=float, default=DEFAULT_MAX_WZ, help="turn rate limit, rad/s (default 100 deg/s); a faster cmd_vel is refused")
 
 
@@ -100,5 +141,7 @@ def build(bus: Bus, args: argparse.Namespace) -> BaseDriverService:
                          "(or set ASIBOT_PIONEER_PORT)")
     if not (math.isfinite(args.max_vx) and math.isfinite(args.max_wz)):
         raise ValueError("--max-vx and --max-wz must be finite numbers")
+    katana = args.katana if args.katana is not None else os.environ.get(KATANA_ENV, "")
     return BaseDriverService(bus, args.robot or DEFAULT_ROBOT, port, baud=args.baud, params=args.params,
-                             max_vx=args.max_vx, max_wz=args.max_wz)
+                             max_vx=args.max_vx, max_wz=args.max_wz, katana=katana,
+                             calibrate_katana=not args.skip_katana_calibration)

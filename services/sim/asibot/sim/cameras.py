@@ -21,14 +21,12 @@ pixel centres are at integer coordinates, so cx = (width - 1) / 2.
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
-
 import cv2
 import mujoco
 import numpy as np
 
 from asibot import messages as m
+from asibot.depth import Intrinsics
 from asibot.poses import quaternion_wxyz
 from asibot.sim.scene import ROBOT_GROUP
 
@@ -38,29 +36,6 @@ JPEG_QUALITY = 80
 
 # MuJoCo camera frame (x right, y up, z backwards) -> optical frame (x right, y down, z forward)
 _MJ_TO_OPTICAL = np.diag([1.0, -1.0, -1.0])
-
-
-@dataclass(frozen=True)
-class Intrinsics:
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-
-    @classmethod
-    def from_fovy(cls, width: int, height: int, fovy_deg: float) -> "Intrinsics":
-        if width < 2 or height < 2:
-            raise ValueError("camera resolution must be at least 2x2 pixels")
-        f = 0.5 * height / math.tan(math.radians(fovy_deg) / 2)
-        return cls(width, height, f, f, (width - 1) / 2, (height - 1) / 2)
-
-    def rays(self) -> np.ndarray:
-        """Unit ray directions, optical frame, (H*W, 3), row-major from the top-left pixel."""
-        u, v = np.meshgrid(np.arange(self.width), np.arange(self.height))
-        d = np.stack([(u - self.cx) / self.fx, (v - self.cy) / self.fy, np.ones_like(u, float)], -1)
-        return (d / np.linalg.norm(d, axis=-1, keepdims=True)).reshape(-1, 3)
 
 
 class Camera:

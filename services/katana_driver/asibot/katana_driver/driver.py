@@ -1,0 +1,479 @@
+"""The Katana driver: the driver contract on top of `Katana`. No bus here.
+
+One control thread owns the serial line: at CONTROL_RATE_HZ it reads every motor's position
+and status ('N' twice), checks for a collision, advances the set-points (rate-limited to the
+catalogue's max speeds, the firmware's own limit behind them) and sends the targets that
+changed ('C'), then reports the arm and gripper state. Commands, the estop and the holder
+arrive on other threads and only touch the set-points under a lock.
+
+Estop, the command watchdog and a change of controller hold the arm where it is (every motor
+MCF_FREEZE at its measured position); a fault (a collision, a silent controller, a refusal)
+does the same and latches until reset_fault. After any of them a stream of commands from
+before moves nothing until it pauses (asibot.safety.arming).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from typing import Callable
+
+from asibot.katana_driver import protocol as p
+from asibot.katana_driver.katana import Interrupted, Katana, MotorParams, Silent, gripper_counts, gripper_opening
+from asibot.messages import ArmState, GripperState
+from asibot.robots import RobotSpec
+from asibot.safety.arming import Arming
+from asibot.safety.events import CommandRefused, quantity
+from asibot.safety.watchdog import Watchdog
+from asibot.timing import Ticker
+
+log = logging.getLogger(__name__)
+
+#: Cycles a second. One cycle is two 'N' (23 bytes each, request and reply) and at most six
+#: 'C' (15 bytes each): 136 bytes, 24 ms at 57600 baud (10 bits a byte), within 40 ms.
+CONTROL_RATE_HZ = 25
+POSITION_TOLERANCE_RAD = 1e-4
+VELOCITY_TOLERANCE = 1e-3
+#: The fingers hold something when they were told to close this much further than they are.
+GRIP_SLACK_M = 0.005
+
+StateSink = Callable[[ArmState, GripperState], None]
+EventSink = Callable[[str, str, str], None]      # level, code, text
+
+
+class FaultError(Exception):
+    """reset_fault could not clear the fault; the message says why and what to do."""
+
+
+class KatanaDriver:
+    """Drives the arm of `spec` (the catalogue's Katana) through `katana`."""
+
+    def __init__(self, katana: Katana, spec: RobotSpec, on_state: StateSink, on_event: EventSink, *,
+                 calibrate: bool = True, rate_hz: float = CONTROL_RATE_HZ) -> None:
+        self.katana = katana
+        self.spec = spec
+        self.names = list(spec.joint_names)
+        self.joints: list[MotorParams] = list(katana.motors[:len(self.names)])
+        self.gripper: MotorParams = katana.motors[len(self.names)]
+        self.lower, self.upper, self.vmax = list(spec.lower), list(spec.upper), list(spec.max_velocity)
+        self.n = len(self.names)
+        self.on_state, self.on_event = on_state, on_event
+        self.calibrate_first = calibrate
+        self.period = 1.0 / rate_hz
+        self._lock = threading.RLock()
+        self._stop = threading.Event()
+        self._abort_calibration = threading.Event()     # the estop or a shutdown during calibration
+        self.fault = "The Katana is starting" + (" (calibrating)." if calibrate else ".")
+        self._faulted = True
+        self._fault_code = "starting"
+        self.estop = False
+        self.mode = "idle"
+        self.arming = Arming()
+        self.watchdog = Watchdog()
+        self.setpoint: list[float] = [0.0] * self.n   # rad, what the motors are told
+        self._goal: list[float] = [0.0] * self.n
+        self._velocity: list[float] = [0.0] * self.n
+        self._sent: list[int | None] = [None] * (self.n + 1)
+        self._gripper_goal: int | None = None
+        self._gripper_command: float | None = None
+        self._hold_pending = False
+        self._measured: list[float] | None = None      # rad
+        self._counts: list[int] | None = None
+        self._rates: list[float] = [0.0] * self.n
+        self._t_measured = 0.0
+        self._reset_request: tuple[threading.Event, list[dict | Exception]] | None = None
+        self.counters = {"cycles": 0, "rejected_commands": 0, "ignored_commands": 0, "not_ready": 0,
+                         "faults": 0, "targets_sent": 0}
+        self._ticker: Ticker | None = None
+        self._thread = threading.Thread(target=self._run, name="katana-control", daemon=True)
+
+    # ------------------------------------------------------------ life cycle
+    def start(self) -> None:
+        self._thread.start()
+
+    def close(self) -> None:
+        self._stop.set()
+        self._abort_calibration.set()
+        if self._thread.is_alive() and threading.current_thread() is not self._thread:
+            self._thread.join(3.0)
+        try:
+            if self._counts is not None and not self._faulted:
+                self.katana.freeze(self._counts)
+        except (Silent, p.ProtocolError, p.FirmwareError, OSError):
+            pass
+
+    # ------------------------------------------------------------ inputs (any thread)
+    def command(self, mode: str, values: list[float], velocities: list[float] | None = None,
+                controller: str = "") -> bool:
+        """Apply an ArmCommand of the holder. Raises ValueError (changes nothing) on bad input,
+        CommandRefused beyond a limit or max speed (refused whole, never clipped), arming's
+        NotReady for a stream from before a recovery. False when ignored (estop or fault)."""
+        if mode not in ("position", "velocity"):
+            self.counters["rejected_commands"] += 1
+            raise ValueError(f"mode must be 'position' or 'velocity', got {mode!r}")
+        if len(values) != self.n:
+            self.counters["rejected_commands"] += 1
+            raise ValueError(f"the Katana has {self.n} joints ({', '.join(self.names)}); "
+                             f"the command has {len(values)} values")
+        if velocities and len(velocities) != self.n:
+            self.counters["rejected_commands"] += 1
+            raise ValueError(f"velocities must be empty or have {self.n} values, not {len(velocities)}")
+        values, velocities = [float(v) for v in values], [float(v) for v in velocities or []]
+        with self._lock:
+            try:
+                self._check(mode, values, velocities)
+            except ValueError:
+                self.counters["rejected_commands"] += 1
+                raise
+            now = time.monotonic()
+            may_move = self.arming.admit(controller, now)
+            if self.estop or self._faulted:
+                self.counters["ignored_commands"] += 1
+                return False
+            if not may_move:
+                self.counters["not_ready"] += 1
+                raise self.arming.refusal("the arm")
+            self.watchdog.feed(now)
+            if mode == "position":
+                self._goal = [min(max(v, lo), hi) if abs(v - min(max(v, lo), hi)) <= POSITION_TOLERANCE_RAD else v
+                              for v, lo, hi in zip(values, self.lower, self.upper)]
+                self._velocity = [0.0] * self.n
+            else:
+                self._velocity = [max(-m, min(m, v)) for v, m in zip(values, self.vmax)]
+            self.mode = mode
+            return True
+
+    def command_gripper(self, opening: float, controller: str = "") -> bool:
+        """Open the fingers to `opening` m; CommandRefused outside 0..max opening."""
+        top = self.spec.gripper_max_opening
+        if not math.isfinite(opening):
+            raise CommandRefused("not_finite", f"gripper opening {quantity(opening)} is not a finite number")
+        if not -1e-6 <= opening <= top + 1e-6:
+            raise CommandRefused("position_limit", f"gripper opening {quantity(opening, 'm')} is outside "
+                                                   f"0..{top:g} m")
+        with self._lock:
+            now = time.monotonic()
+            may_move = self.arming.admit(controller, now)
+            if self.estop or self._faulted:
+                self.counters["ignored_commands"] += 1
+                return False
+            if not may_move:
+                raise self.arming.refusal("the gripper")
+            self._gripper_command = opening
+            self._gripper_goal = gripper_counts(opening, top, self.gripper)
+            return True
+
+    def heard(self, controller: str) -> None:
+        with self._lock:
+            self.arming.heard(controller, time.monotonic())
+
+    def set_estop(self, engaged: bool, reason: str = "", by: str = "") -> None:
+        with self._lock:
+            if engaged == self.estop:
+                return
+            self.estop = engaged
+            who = f" by {by}" if by else ""
+            if engaged:
+                self._hold()
+                self._abort_calibration.set()
+            else:
+                self.arming.disarm(f"the emergency stop was released{who}")
+                ready = self.arming.ready_text("The arm")
+        if engaged:
+            self.on_event("warning", "estop", f"Emergency stop engaged{who}" + (f" ({reason})" if reason else "")
+                          + ": the arm holds its position and ignores motion commands until it is released.")
+        else:
+            self.on_event("info", "estop_released", f"Emergency stop released{who}"
+                          + (f" ({reason})" if reason else "") + ".")
+            self.on_event("info", "ready", ready)
+
+    def set_controller(self, holder: str | None) -> None:
+        with self._lock:
+            moving = self._moving()
+            if moving:
+                self._hold()
+            if holder is not None:
+                self.arming.disarm(f"controller {holder!r} took hold of it")
+                ready = self.arming.ready_text("The arm")
+            else:
+                self.arming.disarm("its controller disappeared")
+        if moving:
+            self.on_event("warning", "controller_lost",
+                          "The controller of the arm changed or disappeared while the arm was moving: the arm stopped.")
+        if holder is not None:
+            self.on_event("info", "ready", ready)
+
+    def reset_fault(self, timeout: float = 10.0) -> dict:
+        """Clear a latched fault (on the control thread): the controller must answer; every
+        motor is frozen where it stands, which also clears a collision."""
+        done = threading.Event()
+        result: list[dict | Exception] = []
+        with self._lock:
+            if self._reset_request is not None:
+                raise FaultError("A fault reset is already running; wait for it to finish.")
+            self._reset_request = (done, result)
+        if not done.wait(timeout):
+            raise FaultError(f"The fault reset did not finish within {timeout:g} s; check the serial cable.")
+        outcome = result[0]
+        if isinstance(outcome, Exception):
+            raise FaultError(str(outcome))
+        return outcome
+
+    def status(self) -> dict:
+        with self._lock:
+            return {"names": self.names, "lower": self.lower, "upper": self.upper, "max_velocity": self.vmax,
+                    "mode": self._mode(), "fault": self.fault, "estop": self.estop,
+                    "control_rate_hz": round(1.0 / self.period, 3),
+                    "counts": list(self._counts) if self._counts is not None else None}
+
+    def health(self) -> dict:
+        with self._lock:
+            return {"mode": self._mode(), "fault": self.fault, **self.counters,
+                    "requests": self.katana.requests, "retried": self.katana.retried}
+
+    # ------------------------------------------------------------ helpers (under the lock)
+    def _mode(self) -> str:
+        return "fault" if self._faulted else self.mode
+
+    def _moving(self) -> bool:
+        return any(v != 0.0 for v in self._velocity) or any(
+            abs(g - s) > 1e-9 for g, s in zip(self._goal, self.setpoint))
+
+    def _hold(self) -> None:
+        """Stop where the arm is: set-points to the measured positions, frozen there next cycle."""
+        if self._measured is not None:
+            self.setpoint = list(self._measured)
+        self._goal = list(self.setpoint)
+        self._velocity = [0.0] * self.n
+        self._gripper_goal = None
+        self._hold_pending = True
+
+    def _check(self, mode: str, values: list[float], velocities: list[float]) -> None:
+        for name, v in zip(self.names, values + velocities):
+            if not math.isfinite(v):
+                raise CommandRefused("not_finite", f"joint {name} got {quantity(v)}, not a finite number")
+        if mode == "velocity":
+            self._within_speeds(values, "velocity")
+            return
+        here = [self.setpoint] + ([self._measured] if self._measured is not None else [])
+        for i, v in enumerate(values):
+            lo, hi = self.lower[i], self.upper[i]
+            if v > max([hi] + [h[i] for h in here]) + POSITION_TOLERANCE_RAD:
+                raise CommandRefused("position_limit", f"joint {self.names[i]} position {quantity(v, 'rad', hi)} "
+                                                       f"is beyond its upper limit {quantity(hi, 'rad', v)}")
+            if v < min([lo] + [h[i] for h in here]) - POSITION_TOLERANCE_RAD:
+                raise CommandRefused("position_limit", f"joint {self.names[i]} position {quantity(v, 'rad', lo)} "
+                                                       f"is beyond its lower limit {quantity(lo, 'rad', v)}")
+        if velocities:
+            self._within_speeds(velocities, "velocity feed-forward")
+
+    def _within_speeds(self, values: list[float], what: str) -> None:
+        for name, v, m in zip(self.names, values, self.vmax):
+            if abs(v) > m * (1.0 + VELOCITY_TOLERANCE):
+                raise CommandRefused("speed_limit", f"joint {name} {what} {quantity(v, 'rad/s', m)} is beyond "
+                                                    f"its max speed {quantity(m, 'rad/s', abs(v))}")
+
+    # ------------------------------------------------------------ the control thread
+    def _run(self) -> None:
+        try:
+            self._bring_up()
+        except Interrupted:
+            self._enter_fault("startup", "The Katana's calibration was interrupted by the emergency stop: "
+                              "every motor holds where it stands; release it, then call reset_fault to "
+                              "calibrate again.")
+        except (Silent, p.ProtocolError, p.FirmwareError, OSError) as exc:
+            self._enter_fault("startup", self._sentence(exc, "starting"))
+        self._ticker = Ticker(1.0 / self.period, self._stop)
+        while self._ticker.wait():
+            try:
+                self._tick()
+            except Exception:       # a bug must not silently stop the loop
+                log.exception("control cycle failed")
+                self._enter_fault("internal", "The Katana driver hit an internal error and stopped the arm; "
+                                  "see its log, then call reset_fault.")
+
+    def _bring_up(self) -> None:
+        version, revision = self.katana.firmware()
+        log.info("Katana master firmware %d.%d", version, revision)
+        if self.calibrate_first:
+            log.info("calibrating: every motor searches its mechanical stopper")
+            with self._lock:
+                if self.estop or self._stop.is_set():
+                    raise Interrupted("the emergency stop is engaged")
+                self._abort_calibration.clear()
+            self.katana.calibrate(stop=self._abort_calibration)
+        counts = self.katana.start()
+        with self._lock:
+            self._take(counts, time.monotonic())
+            self.setpoint = list(self._measured or self.setpoint)
+            self._goal = list(self.setpoint)
+            self._velocity = [0.0] * self.n
+            self._sent = list(counts)
+            self.fault, self._faulted, self._fault_code = "", False, ""
+            self.mode = "idle"
+        log.info("the Katana holds its position; motion commands are obeyed from now on")
+
+    def _take(self, counts: list[int], now: float) -> None:
+        rad = [j.to_rad(c) for j, c in zip(self.joints, counts)]
+        if self._measured is not None and now > self._t_measured:
+            dt = now - self._t_measured
+            self._rates = [(a - b) / dt for a, b in zip(rad, self._measured)]
+        self._measured, self._counts, self._t_measured = rad, list(counts), now
+
+    def _tick(self) -> None:
+        now = time.monotonic()
+        if not (self._faulted and self._fault_code in ("silent", "startup")):   # silent: nothing to ask
+            try:
+                counts = self.katana.positions()
+                statuses = self.katana.statuses()
+                with self._lock:
+                    self._take(counts, now)
+                self._check_status(statuses)
+                self._watchdog(now)
+                self._send()
+            except (Silent, p.ProtocolError, p.FirmwareError, OSError) as exc:
+                code = "silent" if isinstance(exc, (Silent, OSError)) else "refused"
+                self._enter_fault(code, self._sentence(exc, "running"))
+        self.counters["cycles"] += 1
+        self._publish()
+        self._serve_reset()
+
+    def _check_status(self, statuses: list[int]) -> None:
+        for i, s in enumerate(statuses):
+            if s == p.MSF_MOTCRASHED:
+                what = f"joint {self.names[i]}" if i < self.n else "the gripper"
+                self._enter_fault("collision", f"Motor {i + 1} ({what}) reports a collision (status "
+                                  f"{s}, {p.status_name(s)}): the arm was stopped and holds where it is; "
+                                  "free it, then call reset_fault.")
+                return
+
+    def _watchdog(self, now: float) -> None:
+        with self._lock:
+            fired = self.watchdog.fires(now, self.mode == "velocity" and any(self._velocity))
+            if fired:
+                self._hold()
+        if fired:
+            self.on_event("warning", "watchdog", self.watchdog.says("velocity command",
+                                                                    "the arm stopped and holds its position"))
+
+    def _send(self) -> None:
+        """Advance the set-points one period and send the targets that changed."""
+        with self._lock:
+            if self._faulted:
+                return
+            hold, self._hold_pending = self._hold_pending, False
+            if hold:       # from where the arm stands now: what is frozen is the new set-point
+                freeze = list(self._counts or [])
+                if self._measured is not None:
+                    self.setpoint = list(self._measured)
+                    self._goal = list(self.setpoint)
+            else:
+                freeze = []
+                dt = self.period
+                new = []
+                for i in range(self.n):
+                    s, lo, hi, vmax = self.setpoint[i], self.lower[i], self.upper[i], self.vmax[i]
+                    want = s + self._velocity[i] * dt if self.mode == "velocity" else self._goal[i]
+                    step = max(-vmax * dt, min(vmax * dt, want - s))
+                    new.append(min(max(s + step, min(lo, s)), max(hi, s)))
+                self.setpoint = new
+            targets = [j.to_counts(r) for j, r in zip(self.joints, self.setpoint)]
+            gripper = self._gripper_goal
+        if freeze:
+            self.katana.freeze(freeze)
+            with self._lock:
+                self._sent = list(freeze)
+            return
+        for j, (m, t) in enumerate(zip(self.joints, targets)):
+            if t != self._sent[j]:
+                self.katana.set_target(m.motor, t)
+                self._sent[j] = t
+                self.counters["targets_sent"] += 1
+        if gripper is not None and gripper != self._sent[self.n]:
+            self.katana.set_target(self.gripper.motor, gripper)
+            self._sent[self.n] = gripper
+            self.counters["targets_sent"] += 1
+
+    def _sentence(self, exc: Exception, when: str) -> str:
+        if isinstance(exc, (Silent, OSError)):
+            return (f"The Katana's controller stopped answering ({exc}): the arm was stopped; check its power "
+                    "and the serial cable, then call reset_fault.")
+        if isinstance(exc, p.FirmwareError):
+            return f"While {when}, {exc}: the arm was stopped; call reset_fault."
+        return f"While {when}, the Katana's answer made no sense ({exc}): the arm was stopped; call reset_fault."
+
+    def _enter_fault(self, code: str, sentence: str) -> None:
+        with self._lock:
+            if self._faulted and self._fault_code not in ("starting",):
+                return
+            self._faulted = True
+            self.fault, self._fault_code = sentence, code
+            self._hold()
+            counts = list(self._counts) if self._counts is not None else None
+        self.counters["faults"] += 1
+        if code not in ("silent", "startup") and counts is not None:
+            try:
+                self.katana.freeze(counts)      # hold where it stands; clears nothing
+            except (Silent, p.ProtocolError, p.FirmwareError, OSError):
+                pass
+        log.error("%s", sentence)
+        self.on_event("error", code, sentence)
+
+    def _publish(self) -> None:
+        with self._lock:
+            if self._counts is None:
+                return
+            mode, fault = self._mode(), self.fault
+            positions = list(self._measured or [])
+            rates = list(self._rates)
+            grip_counts = self._counts[self.n] if len(self._counts) > self.n else None
+            commanded = self._gripper_command
+        arm = ArmState(names=self.names, positions=positions, velocities=rates, mode=mode, fault=fault)
+        top = self.spec.gripper_max_opening
+        opening = gripper_opening(grip_counts, top, self.gripper) if grip_counts is not None else 0.0
+        holding = commanded is not None and commanded + GRIP_SLACK_M < opening
+        try:
+            self.on_state(arm, GripperState(opening=opening, holding=holding))
+        except Exception:
+            log.exception("publishing the arm state failed")
+
+    def _serve_reset(self) -> None:
+        with self._lock:
+            request, self._reset_request = self._reset_request, None
+        if request is None:
+            return
+        done, result = request
+        try:
+            result.append(self._reset())
+        except Interrupted:
+            result.append(FaultError("The calibration was interrupted by the emergency stop; release it, "
+                                     "then call reset_fault again."))
+        except (Silent, p.ProtocolError, p.FirmwareError, OSError) as exc:
+            result.append(FaultError(self._sentence(exc, "resetting the fault").replace(
+                "call reset_fault", "call reset_fault again")))
+        finally:
+            done.set()
+
+    def _reset(self) -> dict:
+        was = self._fault_code
+        if was in ("startup",):
+            self._bring_up()
+        else:
+            counts = self.katana.positions()
+            self.katana.freeze(counts)
+            with self._lock:
+                self._take(counts, time.monotonic())
+                self.setpoint = list(self._measured or self.setpoint)
+                self._goal = list(self.setpoint)
+                self._velocity = [0.0] * self.n
+                self._sent = list(counts)
+                self.fault, self._faulted, self._fault_code = "", False, ""
+                self.mode = "idle"
+        with self._lock:
+            self.arming.disarm("the fault was reset")
+            ready = self.arming.ready_text("The arm")
+        self.on_event("info", "fault_reset", "The fault was reset: every motor holds its position.")
+        self.on_event("info", "ready", ready)
+        return {"was": was}
