@@ -168,7 +168,9 @@ def test_the_image_runs_the_sim_profile_with_compose(image: dict[str, str], engi
             seen = {(s["service"], s["instance"]) for s in json.loads(done.stdout)["services"]}
             return {(name, robot) for name, robot in wanted
                     if not any(n == name and (robot is None or i == robot) for n, i in seen)}
-        wait_until(lambda: missing() == set(), 240, interval=2,
+        # Up to 8 min: each container imports MuJoCo, Pinocchio or OpenCV from vfs layers, and on a
+        # loaded CI a run that passed in one stop took over the 4 min this waited before.
+        wait_until(lambda: missing() == set(), 480, interval=2,
                    message=lambda: f"not in `asibot status`: {missing()}; {logs(up, env)}")
 
         moved = run([sys.executable, "-c", MOVE_THE_ARM], host, 120).stdout
