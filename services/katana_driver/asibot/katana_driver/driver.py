@@ -304,7 +304,11 @@ class KatanaDriver:
                     raise Interrupted("the emergency stop is engaged")
                 self._abort_calibration.clear()
             self.katana.calibrate(stop=self._abort_calibration)
-        counts = self.katana.start()
+        self._hold_here(self.katana.start())
+        log.info("the Katana holds its position; motion commands are obeyed from now on")
+
+    def _hold_here(self, counts: list[int]) -> None:
+        """The motors stand at `counts` and hold: the set-point is where they are, no fault."""
         with self._lock:
             self._take(counts, time.monotonic())
             self.setpoint = list(self._measured or self.setpoint)
@@ -313,7 +317,6 @@ class KatanaDriver:
             self._sent = list(counts)
             self.fault, self._faulted, self._fault_code = "", False, ""
             self.mode = "idle"
-        log.info("the Katana holds its position; motion commands are obeyed from now on")
 
     def _take(self, counts: list[int], now: float) -> None:
         rad = [j.to_rad(c) for j, c in zip(self.joints, counts)]
@@ -463,14 +466,7 @@ class KatanaDriver:
         else:
             counts = self.katana.positions()
             self.katana.freeze(counts)
-            with self._lock:
-                self._take(counts, time.monotonic())
-                self.setpoint = list(self._measured or self.setpoint)
-                self._goal = list(self.setpoint)
-                self._velocity = [0.0] * self.n
-                self._sent = list(counts)
-                self.fault, self._faulted, self._fault_code = "", False, ""
-                self.mode = "idle"
+            self._hold_here(counts)
         with self._lock:
             self.arming.disarm("the fault was reset")
             ready = self.arming.ready_text("The arm")
