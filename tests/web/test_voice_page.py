@@ -177,7 +177,10 @@ def test_a_made_up_word_is_recorded_by_saying_it_on_the_page_and_then_launches_i
             again = ""
         row.get_by_role("button", name="Say it again: zorblat").click()
         page.get_by_text(f"Heard it again: {again}", exact=False).wait_for(timeout=30000)
-        row.get_by_text(f"({3 if not again else 2} of 3 sayings)", exact=False).wait_for(timeout=10000)
+        # the same saying heard twice is kept once: the row counts the different ones
+        kept = http(kitchen_voice, "GET", "/api/voice/learned")["words"]["zorblat"]
+        assert 1 <= len(kept) <= 3, kept
+        row.get_by_text(f"({len(kept)} of 3 sayings)", exact=False).wait_for(timeout=10000)
         screenshot(page, "speech-learned")
         row.get_by_role("button", name="Forget how I say it: zorblat").click()
         row.get_by_role("button", name="Record by saying it: zorblat").wait_for(timeout=10000)

@@ -16,7 +16,15 @@ export async function startListening() {
   if (!navigator.mediaDevices || !navigator.mediaDevices.getUserMedia) {
     throw new Error('This browser gives no microphone to the page (it needs https:// or this machine).');
   }
-  const stream = await navigator.mediaDevices.getUserMedia({ audio: { channelCount: 1, echoCancellation: true, noiseSuppression: true } });
+  // The sound as the microphone gives it: the browser's processing for calls (echo cancelling,
+  // noise suppression, automatic gain) adapts as it goes, so one word said the same way twice
+  // reached the recogniser as two different sounds, and a word learned from one saying did not
+  // match the next (one recording played in a loop was read as 'S L AO R OW N D L ER', 'G AO R OW N'
+  // and 'L ER OW G'; unprocessed, the same phones each time). The voice service finds the speech
+  // against the room's own noise itself, and the recogniser evens out the level.
+  const stream = await navigator.mediaDevices.getUserMedia({
+    audio: { channelCount: 1, echoCancellation: false, noiseSuppression: false, autoGainControl: false },
+  });
   const context = new AudioContext();
   await context.audioWorklet.addModule('/static/js/mic-worklet.js');
   const node = new AudioWorkletNode(context, 'asibot-capture');
