@@ -144,6 +144,7 @@ def test_a_hung_control_loop_stops_the_drives_and_faults_when_it_comes_back(rig)
     gate.set()                                       # it comes back: a fault with a sentence
     wait_until(lambda: rig.last.mode == "fault", 3)
     assert "control loop stalled" in rig.last.fault and "reset_fault" in rig.last.fault
+    assert rig.master.frames.sending() == []         # its cycles since then restarted no set-point
     assert d.reset_fault() == {"reinitialised": []}  # configured as they were: enabled again
     wait_until(lambda: set(rig.emu.states().values()) == {"operation enabled"}, 3)
     wait_until(lambda: rig.last.mode == "idle", 2)

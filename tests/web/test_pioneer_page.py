@@ -26,10 +26,15 @@ def test_the_pioneer_page_jogs_the_katana(browser, apartment):
         page.get_by_text("This page commands pioneer-sim").wait_for(timeout=15000)
         states = Inbox()
         sub = apartment.bus.subscribe(keys.arm_state("pioneer-sim"), ArmState, states)
-        wait_until(lambda: len(states), timeout=10)
+        # the step is from where the joint stands when it is asked for: read it once the arm is still
+        wait_until(lambda: _arm_still(states), timeout=20, message="the Katana never stood still")
         q0 = states.last().positions[0]
         page.get_by_role("button", name="Joint 1 plus").click()
-        wait_until(lambda: abs(states.last().positions[0] - q0 - math.radians(5)) < math.radians(0.3), timeout=15)
+        wait_until(lambda: abs(states.last().positions[0] - q0 - math.radians(5)) < math.radians(0.3), timeout=15,
+                   message=lambda: f"joint 1 went from {math.degrees(q0):.2f} to "
+                                   f"{math.degrees(states.last().positions[0]):.2f} deg, not 5 deg more; the arm "
+                                   f"is {states.last().mode!r} {states.last().fault!r}; the page says "
+                                   f"{page.locator('#notice').inner_text()!r}")
         z = page.locator(".jog-grid").nth(1).locator(".value").nth(2)
         z0 = float(z.inner_text())
         page.get_by_role("button", name="z minus").click()
@@ -38,6 +43,12 @@ def test_the_pioneer_page_jogs_the_katana(browser, apartment):
         sub.close()
     finally:
         page.close()
+
+
+def _arm_still(states: Inbox) -> bool:
+    last = states.all()[-5:]
+    return len(last) == 5 and all(abs(a - b) < math.radians(0.05)
+                                  for state in last for a, b in zip(state.positions, last[0].positions))
 
 
 def _truth(apartment) -> Inbox:

@@ -39,6 +39,9 @@ class CyclicFrames(Protocol):
     def drop(self, cob_id: int) -> None:
         """Stop sending `cob_id` (no-op when it is not being sent)."""
 
+    def sending(self) -> list[int]:
+        """The COB-IDs being sent, lowest first."""
+
     def tick(self) -> None:
         """Called by the control loop once per period."""
 
@@ -104,6 +107,9 @@ class PeriodicFrames:
             except (can.CanError, OSError):     # the interface may already be gone
                 log.debug("stopping the periodic 0x%03X failed", cob_id, exc_info=True)
 
+    def sending(self) -> list[int]:
+        return sorted(self._tasks)
+
     def tick(self) -> None:
         pass
 
@@ -129,6 +135,9 @@ class LoopFrames:
     def drop(self, cob_id: int) -> None:
         self._frames.pop(cob_id, None)
         self._due.pop(cob_id, None)
+
+    def sending(self) -> list[int]:
+        return sorted(self._frames)
 
     def tick(self) -> None:
         now = time.monotonic()

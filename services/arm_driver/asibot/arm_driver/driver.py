@@ -22,46 +22,41 @@ from asibot.arm_driver.cia402 import State
 from asibot.arm_driver.config import ArmConfig
 from asibot.arm_driver.master import CanopenMaster, DriveError, Feedback, LoopStalled
 from asibot.arm_driver.motion import JointReference
-from asibot.safety.arming import Arming
 from asibot.messages import ArmState
+from asibot.safety.guarded_arm import EventSink, FaultError, GuardedArm
 from asibot.timing import Ticker
 
 log = logging.getLogger(__name__)
 
 StateSink = Callable[[ArmState], None]
-EventSink = Callable[[str, str, str], None]      # level, code, text
 MODE_NAMES = {objects.MODE_CSP: "cyclic synchronous position", objects.MODE_PROFILE_POSITION: "profile position"}
 
-
-class FaultError(Exception):
-    """reset_fault could not clear the fault; the message says why and what to do."""
+__all__ = ["ArmDriver", "FaultError"]
 
 
-class ArmDriver:
+class ArmDriver(GuardedArm):
     """Drives the arm described by `config` through `master`."""
 
+    arm = "the ASIBOT"
+    line = "the CAN bus"
+    after_reset = "the drives are enabled and hold their position"
+
     def __init__(self, master: CanopenMaster, config: ArmConfig, on_state: StateSink, on_event: EventSink) -> None:
+        super().__init__(config.names, on_event)
         self.master = master
         self.config = config
         self.on_state = on_state
-        self.on_event = on_event
         self.joints = config.joints
         self.ref = JointReference([j.lower for j in config.joints], [j.upper for j in config.joints],
                                   [j.max_velocity for j in config.joints], config.period, names=config.names)
-        self._lock = threading.RLock()
+        self.watchdog = self.ref.watchdog       # one watchdog: the reference's, which its feed-forward reads
         self._stop = threading.Event()
         self._up: set[int] = set()
         self.fault = "The drives are starting."
-        self._faulted = True
         self._fault_code: tuple[str, int] = ("starting", 0)
         self._reported: set[tuple[str, int]] = set()
-        self.estop = False
-        self._estop_reason = ""
-        self.arming = Arming()          # a driver starts armed (asibot.safety.arming says why)
-        self._reset_request: tuple[threading.Event, list[dict | Exception]] | None = None
         self._feedback: dict[int, Feedback] = {}
-        self.counters = {"cycles": 0, "rejected_commands": 0, "ignored_commands": 0, "not_ready": 0, "faults": 0,
-                         "tx_errors": 0}
+        self.counters["tx_errors"] = 0
         self._ticker: Ticker | None = None
         self._thread = threading.Thread(target=self._run, name="arm-control", daemon=True)
 
@@ -80,114 +75,31 @@ class ArmDriver:
                 pass
         self.master.close()
 
-    # ------------------------------------------------------------ inputs (any thread)
-    def command(self, mode: str, values: list[float], velocities: list[float] | None = None,
-                controller: str = "") -> bool:
-        """Apply an ArmCommand of `controller` (the holder: the service checked). Raises
-        ValueError (and changes nothing: the arm keeps its previous motion) on bad input;
-        motion.CommandRefused for a value beyond a joint's limits or max speed, or not finite:
-        such a command is refused whole, never clipped; arming.NotReady for a command that
-        continues a stream from before the last recovery.
+    # ------------------------------------------------------------ the guarded arm's hooks (under the lock)
+    def _measured(self) -> list[float] | None:
+        fb = self._feedback
+        return [j.units.to_rad(fb[j.node].position) for j in self.joints] if all(j.node in fb for j in self.joints) \
+            else None
 
-        Returns False when the command was ignored because of estop or a fault.
-        """
-        n = len(self.joints)
-        if mode not in ("position", "velocity"):
-            self.counters["rejected_commands"] += 1
-            raise ValueError(f"mode must be 'position' or 'velocity', got {mode!r}")
-        if len(values) != n:
-            self.counters["rejected_commands"] += 1
-            raise ValueError(f"the ASIBOT has {n} joints ({', '.join(self.config.names)}); "
-                             f"the command has {len(values)} values")
-        if velocities and len(velocities) != n:
-            self.counters["rejected_commands"] += 1
-            raise ValueError(f"velocities must be empty or have {n} values, not {len(velocities)}")
-        values, velocities = list(values), list(velocities or [])
-        with self._lock:
-            fb = self._feedback
-            measured = ([j.units.to_rad(fb[j.node].position) for j in self.joints]
-                        if all(j.node in fb for j in self.joints) else None)
-            try:
-                self.ref.check(mode, values, velocities, measured)
-            except ValueError:
-                self.counters["rejected_commands"] += 1
-                raise
-            now = time.monotonic()
-            may_move = self.arming.admit(controller, now)   # noted even when ignored below
-            if self.estop or self._faulted:
-                self.counters["ignored_commands"] += 1
-                return False
-            if not may_move:
-                self.counters["not_ready"] += 1
-                raise self.arming.refusal("the arm")
-            if mode == "position":
-                self.ref.position(values, velocities, now, measured)
-            else:
-                self.ref.velocity(values, now)
-            return True
+    def _check_limits(self, mode: str, values: list[float], velocities: list[float]) -> None:
+        self.ref.check(mode, values, velocities, self._measured())
 
-    def heard(self, controller: str) -> None:
-        """A command of a controller that does not hold the arm (refused by the service): noted,
-        so that its stream does not move the arm the moment it takes over."""
-        with self._lock:
-            self.arming.heard(controller, time.monotonic())
-
-    def set_estop(self, engaged: bool, reason: str = "", by: str = "") -> None:
-        with self._lock:
-            if engaged == self.estop:
-                return
-            self.estop = engaged
-            self._estop_reason = reason
-            who = f" by {by}" if by else ""
-            if engaged:
-                self.ref.hold()
-            else:
-                self.arming.disarm(f"the emergency stop was released{who}")
-                ready = self.arming.ready_text("The arm")
-        if engaged:
-            self.on_event("warning", "estop", f"Emergency stop engaged{who}" + (f" ({reason})" if reason else "")
-                          + ": the arm holds its position and ignores motion commands until it is released.")
+    def _apply(self, mode: str, values: list[float], velocities: list[float], now: float) -> None:
+        if mode == "position":
+            self.ref.position(values, velocities, now, self._measured())
         else:
-            self.on_event("info", "estop_released", f"Emergency stop released{who}"
-                          + (f" ({reason})" if reason else "") + ".")
-            self.on_event("info", "ready", ready)
+            self.ref.velocity(values, now)
 
-    def set_controller(self, holder: str | None) -> None:
-        """The controller that holds the arm changed (asibot.safety.ownership): stop if the arm was
-        moving, and re-arm for the new holder, if any."""
-        with self._lock:
-            moving = self.ref.moving
-            if moving:
-                self.ref.hold()
-            if holder is not None:
-                self.arming.disarm(f"controller {holder!r} took hold of it")
-                ready = self.arming.ready_text("The arm")
-            else:
-                self.arming.disarm("its controller disappeared")
-        if moving:
-            self.on_event("warning", "controller_lost",
-                          "The controller of the arm changed or disappeared while the arm was moving: the arm stopped.")
-        if holder is not None:
-            self.on_event("info", "ready", ready)
+    def _hold(self) -> None:
+        self.ref.hold()
 
-    def reset_fault(self, timeout: float = 10.0) -> dict:
-        """Clear a latched fault: re-initialise lost drives, reset faulted ones, enable all.
+    def _moving(self) -> bool:
+        return self.ref.moving
 
-        Runs on the control thread; raises FaultError with a sentence when it cannot.
-        """
-        done = threading.Event()
-        result: list[dict | Exception] = []
-        with self._lock:
-            if self._reset_request is not None:
-                raise FaultError("A fault reset is already running; wait for it to finish.")
-            self._reset_request = (done, result)
-        if not done.wait(timeout):
-            raise FaultError(f"The fault reset did not finish within {timeout:g} s; check the CAN bus.")
-        outcome = result[0]
-        if isinstance(outcome, Exception):
-            raise FaultError(str(outcome))
-        return outcome
+    def _streaming(self) -> bool:
+        return self.ref.streaming
 
+    # ------------------------------------------------------------ state (any thread)
     def status(self) -> dict:
         with self._lock:
             fb = self._feedback
@@ -264,7 +176,7 @@ class ArmDriver:
         with self._lock:
             self._feedback = fb
         self._check(fb, now)
-        self._watchdog(now)
+        self._watch(now)
         with self._lock:
             if self._faulted:
                 targets = {n: fb[n].position for n in self.master.modes}
@@ -353,15 +265,6 @@ class ArmDriver:
             except DriveError:
                 self.counters["tx_errors"] += 1
 
-    def _watchdog(self, now: float) -> None:
-        with self._lock:
-            dog = self.ref.watchdog
-            fired = dog.fires(now, self.ref.streaming)
-            if fired:
-                self.ref.hold()
-        if fired:
-            self.on_event("warning", "watchdog", dog.says("velocity command", "the arm stopped and holds its position"))
-
     def _publish(self, fb: dict[int, Feedback]) -> None:
         with self._lock:
             mode, fault = self._mode(), self.fault
@@ -374,22 +277,14 @@ class ArmDriver:
         except Exception:
             log.exception("publishing the arm state failed")
 
-    def _serve_reset(self) -> None:
+    def _reset_failed(self, exc: Exception) -> FaultError | None:
+        if not isinstance(exc, DriveError):
+            return None
         with self._lock:
-            request, self._reset_request = self._reset_request, None
-        if request is None:
-            return
-        done, result = request
-        try:
-            result.append(self._reset())
-        except DriveError as exc:
-            with self._lock:
-                self.fault = str(exc)
-                self._faulted = True
-            self._quick_stop_all()      # the drives this reset enabled before it failed
-            result.append(exc)
-        finally:
-            done.set()
+            self.fault = str(exc)
+            self._faulted = True
+        self._quick_stop_all()      # the drives this reset enabled before it failed
+        return FaultError(str(exc))
 
     def _reset(self) -> dict:
         self.master.bus_off = False
@@ -402,11 +297,6 @@ class ArmDriver:
         self.master.start_cyclic()      # again, if the loop guard had stopped SYNC and the heartbeat
         self._bring_up(lost)
         self.master.snapshot()          # the error-reset EMCYs of this reset are not news
-        with self._lock:
-            self.arming.disarm("the fault was reset")
-            ready = self.arming.ready_text("The arm")
-        self.on_event("info", "fault_reset", "The fault was reset: the drives are enabled and hold their position.")
-        self.on_event("info", "ready", ready)
         return {"reinitialised": [self._name(n) for n in lost]}
 
     def _mode_name(self, node: int) -> str:

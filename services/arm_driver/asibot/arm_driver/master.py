@@ -299,6 +299,8 @@ class CanopenMaster:
 
     def cycle(self, targets: dict[int, int]) -> None:
         """One control period: each drive's set-point (in place for CSP: sent with every SYNC)."""
+        if self.stalled:           # the guard stopped every periodic frame: none until reset_fault starts them
+            return
         if self.frames.error:      # a periodic sender failed since the last period (taken: reported once)
             self.tx_error, self.frames.error = self.frames.error, ""
             raise DriveError(f"The CAN adapter refuses to send ({self.tx_error}); the bus may be off or "

@@ -24,9 +24,8 @@ from asibot.katana_driver import protocol as p
 from asibot.katana_driver.katana import Interrupted, Katana, MotorParams, Silent, gripper_counts, gripper_opening
 from asibot.messages import ArmState, GripperState
 from asibot.robots import RobotSpec
-from asibot.safety.arming import Arming
 from asibot.safety.events import CommandRefused, quantity
-from asibot.safety.watchdog import Watchdog
+from asibot.safety.guarded_arm import EventSink, FaultError, GuardedArm
 from asibot.timing import Ticker
 
 log = logging.getLogger(__name__)
@@ -40,38 +39,33 @@ VELOCITY_TOLERANCE = 1e-3
 GRIP_SLACK_M = 0.005
 
 StateSink = Callable[[ArmState, GripperState], None]
-EventSink = Callable[[str, str, str], None]      # level, code, text
+__all__ = ["KatanaDriver", "FaultError"]
 
 
-class FaultError(Exception):
-    """reset_fault could not clear the fault; the message says why and what to do."""
-
-
-class KatanaDriver:
+class KatanaDriver(GuardedArm):
     """Drives the arm of `spec` (the catalogue's Katana) through `katana`."""
+
+    arm = "the Katana"
+    line = "the serial cable"
+    after_reset = "every motor holds its position"
 
     def __init__(self, katana: Katana, spec: RobotSpec, on_state: StateSink, on_event: EventSink, *,
                  calibrate: bool = True, rate_hz: float = CONTROL_RATE_HZ) -> None:
+        super().__init__(list(spec.joint_names), on_event)
         self.katana = katana
         self.spec = spec
-        self.names = list(spec.joint_names)
         self.joints: list[MotorParams] = list(katana.motors[:len(self.names)])
         self.gripper: MotorParams = katana.motors[len(self.names)]
         self.lower, self.upper, self.vmax = list(spec.lower), list(spec.upper), list(spec.max_velocity)
         self.n = len(self.names)
-        self.on_state, self.on_event = on_state, on_event
+        self.on_state = on_state
         self.calibrate_first = calibrate
         self.period = 1.0 / rate_hz
-        self._lock = threading.RLock()
         self._stop = threading.Event()
         self._abort_calibration = threading.Event()     # the estop or a shutdown during calibration
         self.fault = "The Katana is starting" + (" (calibrating)." if calibrate else ".")
-        self._faulted = True
         self._fault_code = "starting"
-        self.estop = False
         self.mode = "idle"
-        self.arming = Arming()
-        self.watchdog = Watchdog()
         self.setpoint: list[float] = [0.0] * self.n   # rad, what the motors are told
         self._goal: list[float] = [0.0] * self.n
         self._velocity: list[float] = [0.0] * self.n
@@ -83,9 +77,7 @@ class KatanaDriver:
         self._counts: list[int] | None = None
         self._rates: list[float] = [0.0] * self.n
         self._t_measured = 0.0
-        self._reset_request: tuple[threading.Event, list[dict | Exception]] | None = None
-        self.counters = {"cycles": 0, "rejected_commands": 0, "ignored_commands": 0, "not_ready": 0,
-                         "faults": 0, "targets_sent": 0}
+        self.counters["targets_sent"] = 0
         self._ticker: Ticker | None = None
         self._thread = threading.Thread(target=self._run, name="katana-control", daemon=True)
 
@@ -105,46 +97,6 @@ class KatanaDriver:
             pass
 
     # ------------------------------------------------------------ inputs (any thread)
-    def command(self, mode: str, values: list[float], velocities: list[float] | None = None,
-                controller: str = "") -> bool:
-        """Apply an ArmCommand of the holder. Raises ValueError (changes nothing) on bad input,
-        CommandRefused beyond a limit or max speed (refused whole, never clipped), arming's
-        NotReady for a stream from before a recovery. False when ignored (estop or fault)."""
-        if mode not in ("position", "velocity"):
-            self.counters["rejected_commands"] += 1
-            raise ValueError(f"mode must be 'position' or 'velocity', got {mode!r}")
-        if len(values) != self.n:
-            self.counters["rejected_commands"] += 1
-            raise ValueError(f"the Katana has {self.n} joints ({', '.join(self.names)}); "
-                             f"the command has {len(values)} values")
-        if velocities and len(velocities) != self.n:
-            self.counters["rejected_commands"] += 1
-            raise ValueError(f"velocities must be empty or have {self.n} values, not {len(velocities)}")
-        values, velocities = [float(v) for v in values], [float(v) for v in velocities or []]
-        with self._lock:
-            try:
-                self._check(mode, values, velocities)
-            except ValueError:
-                self.counters["rejected_commands"] += 1
-                raise
-            now = time.monotonic()
-            may_move = self.arming.admit(controller, now)
-            if self.estop or self._faulted:
-                self.counters["ignored_commands"] += 1
-                return False
-            if not may_move:
-                self.counters["not_ready"] += 1
-                raise self.arming.refusal("the arm")
-            self.watchdog.feed(now)
-            if mode == "position":
-                self._goal = [min(max(v, lo), hi) if abs(v - min(max(v, lo), hi)) <= POSITION_TOLERANCE_RAD else v
-                              for v, lo, hi in zip(values, self.lower, self.upper)]
-                self._velocity = [0.0] * self.n
-            else:
-                self._velocity = [max(-m, min(m, v)) for v, m in zip(values, self.vmax)]
-            self.mode = mode
-            return True
-
     def command_gripper(self, opening: float, controller: str = "") -> bool:
         """Open the fingers to `opening` m; CommandRefused outside 0..max opening."""
         top = self.spec.gripper_max_opening
@@ -154,72 +106,11 @@ class KatanaDriver:
             raise CommandRefused("position_limit", f"gripper opening {quantity(opening, 'm')} is outside "
                                                    f"0..{top:g} m")
         with self._lock:
-            now = time.monotonic()
-            may_move = self.arming.admit(controller, now)
-            if self.estop or self._faulted:
-                self.counters["ignored_commands"] += 1
+            if not self._may_move(controller, time.monotonic(), "the gripper"):
                 return False
-            if not may_move:
-                raise self.arming.refusal("the gripper")
             self._gripper_command = opening
             self._gripper_goal = gripper_counts(opening, top, self.gripper)
             return True
-
-    def heard(self, controller: str) -> None:
-        with self._lock:
-            self.arming.heard(controller, time.monotonic())
-
-    def set_estop(self, engaged: bool, reason: str = "", by: str = "") -> None:
-        with self._lock:
-            if engaged == self.estop:
-                return
-            self.estop = engaged
-            who = f" by {by}" if by else ""
-            if engaged:
-                self._hold()
-                self._abort_calibration.set()
-            else:
-                self.arming.disarm(f"the emergency stop was released{who}")
-                ready = self.arming.ready_text("The arm")
-        if engaged:
-            self.on_event("warning", "estop", f"Emergency stop engaged{who}" + (f" ({reason})" if reason else "")
-                          + ": the arm holds its position and ignores motion commands until it is released.")
-        else:
-            self.on_event("info", "estop_released", f"Emergency stop released{who}"
-                          + (f" ({reason})" if reason else "") + ".")
-            self.on_event("info", "ready", ready)
-
-    def set_controller(self, holder: str | None) -> None:
-        with self._lock:
-            moving = self._moving()
-            if moving:
-                self._hold()
-            if holder is not None:
-                self.arming.disarm(f"controller {holder!r} took hold of it")
-                ready = self.arming.ready_text("The arm")
-            else:
-                self.arming.disarm("its controller disappeared")
-        if moving:
-            self.on_event("warning", "controller_lost",
-                          "The controller of the arm changed or disappeared while the arm was moving: the arm stopped.")
-        if holder is not None:
-            self.on_event("info", "ready", ready)
-
-    def reset_fault(self, timeout: float = 10.0) -> dict:
-        """Clear a latched fault (on the control thread): the controller must answer; every
-        motor is frozen where it stands, which also clears a collision."""
-        done = threading.Event()
-        result: list[dict | Exception] = []
-        with self._lock:
-            if self._reset_request is not None:
-                raise FaultError("A fault reset is already running; wait for it to finish.")
-            self._reset_request = (done, result)
-        if not done.wait(timeout):
-            raise FaultError(f"The fault reset did not finish within {timeout:g} s; check the serial cable.")
-        outcome = result[0]
-        if isinstance(outcome, Exception):
-            raise FaultError(str(outcome))
-        return outcome
 
     def status(self) -> dict:
         with self._lock:
@@ -233,7 +124,7 @@ class KatanaDriver:
             return {"mode": self._mode(), "fault": self.fault, **self.counters,
                     "requests": self.katana.requests, "retried": self.katana.retried}
 
-    # ------------------------------------------------------------ helpers (under the lock)
+    # ------------------------------------------------------------ the guarded arm's hooks, helpers (under the lock)
     def _mode(self) -> str:
         return "fault" if self._faulted else self.mode
 
@@ -250,7 +141,22 @@ class KatanaDriver:
         self._gripper_goal = None
         self._hold_pending = True
 
-    def _check(self, mode: str, values: list[float], velocities: list[float]) -> None:
+    def _apply(self, mode: str, values: list[float], velocities: list[float], now: float) -> None:
+        if mode == "position":
+            self._goal = [min(max(v, lo), hi) if abs(v - min(max(v, lo), hi)) <= POSITION_TOLERANCE_RAD else v
+                          for v, lo, hi in zip(values, self.lower, self.upper)]
+            self._velocity = [0.0] * self.n
+        else:
+            self._velocity = [max(-m, min(m, v)) for v, m in zip(values, self.vmax)]
+        self.mode = mode
+
+    def _estop_engaged(self) -> None:
+        self._abort_calibration.set()       # a calibration under way stops where it is
+
+    def _streaming(self) -> bool:
+        return self.mode == "velocity" and any(self._velocity)
+
+    def _check_limits(self, mode: str, values: list[float], velocities: list[float]) -> None:
         for name, v in zip(self.names, values + velocities):
             if not math.isfinite(v):
                 raise CommandRefused("not_finite", f"joint {name} got {quantity(v)}, not a finite number")
@@ -334,7 +240,7 @@ class KatanaDriver:
                 with self._lock:
                     self._take(counts, now)
                 self._check_status(statuses)
-                self._watchdog(now)
+                self._watch(now)
                 self._send()
             except (Silent, p.ProtocolError, p.FirmwareError, OSError) as exc:
                 code = "silent" if isinstance(exc, (Silent, OSError)) else "refused"
@@ -351,15 +257,6 @@ class KatanaDriver:
                                   f"{s}, {p.status_name(s)}): the arm was stopped and holds where it is; "
                                   "free it, then call reset_fault.")
                 return
-
-    def _watchdog(self, now: float) -> None:
-        with self._lock:
-            fired = self.watchdog.fires(now, self.mode == "velocity" and any(self._velocity))
-            if fired:
-                self._hold()
-        if fired:
-            self.on_event("warning", "watchdog", self.watchdog.says("velocity command",
-                                                                    "the arm stopped and holds its position"))
 
     def _send(self) -> None:
         """Advance the set-points one period and send the targets that changed."""
@@ -442,22 +339,14 @@ class KatanaDriver:
         except Exception:
             log.exception("publishing the arm state failed")
 
-    def _serve_reset(self) -> None:
-        with self._lock:
-            request, self._reset_request = self._reset_request, None
-        if request is None:
-            return
-        done, result = request
-        try:
-            result.append(self._reset())
-        except Interrupted:
-            result.append(FaultError("The calibration was interrupted by the emergency stop; release it, "
-                                     "then call reset_fault again."))
-        except (Silent, p.ProtocolError, p.FirmwareError, OSError) as exc:
-            result.append(FaultError(self._sentence(exc, "resetting the fault").replace(
-                "call reset_fault", "call reset_fault again")))
-        finally:
-            done.set()
+    def _reset_failed(self, exc: Exception) -> FaultError | None:
+        if isinstance(exc, Interrupted):
+            return FaultError("The calibration was interrupted by the emergency stop; release it, then call "
+                              "reset_fault again.")
+        if isinstance(exc, (Silent, p.ProtocolError, p.FirmwareError, OSError)):
+            return FaultError(self._sentence(exc, "resetting the fault").replace("call reset_fault",
+                                                                                 "call reset_fault again"))
+        return None
 
     def _reset(self) -> dict:
         was = self._fault_code
@@ -467,9 +356,4 @@ class KatanaDriver:
             counts = self.katana.positions()
             self.katana.freeze(counts)
             self._hold_here(counts)
-        with self._lock:
-            self.arming.disarm("the fault was reset")
-            ready = self.arming.ready_text("The arm")
-        self.on_event("info", "fault_reset", "The fault was reset: every motor holds its position.")
-        self.on_event("info", "ready", ready)
         return {"was": was}
