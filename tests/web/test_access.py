@@ -820,7 +820,10 @@ def pointer(browser, kitchen):
     page.wait_for_selector("body[data-ready=true]", timeout=15000)
     page.wait_for_selector(".robot-card[data-robot=asibot-sim]", timeout=15000)
     page.wait_for_selector("text=Motion control")
-    # out of the stretched-up home pose (a singularity, where the tip cannot go further out)
+    # the kitchen as it started (an earlier test may have moved the can, which the phone test
+    # reaches for), then out of the stretched-up home pose (a singularity, where the tip cannot go
+    # further out)
+    kitchen.bus.call(keys.driver_rpc(ROBOT, "reset_world"), {}, timeout=10)
     kitchen.bus.call(keys.cart_rpc(ROBOT, "movj"), {"joints": POINTER_START, "speed": 1.0}, timeout=5)
     wait_until(lambda: stat(kitchen)["state"] == "not_controlling", timeout=20, interval=0.1)
     try:
