@@ -53,7 +53,6 @@ class GuardedArm(abc.ABC):
         self.on_event = on_event
         self._lock = threading.RLock()
         self.estop = False
-        self._estop_reason = ""
         self._faulted = True               # until the control thread has brought the arm up
         self.arming = Arming()             # a driver starts armed (asibot.safety.arming says why)
         self.watchdog = Watchdog()
@@ -134,7 +133,7 @@ class GuardedArm(abc.ABC):
         with self._lock:
             if engaged == self.estop:
                 return
-            self.estop, self._estop_reason = engaged, reason
+            self.estop = engaged
             who = f" by {by}" if by else ""
             if engaged:
                 self._hold()
