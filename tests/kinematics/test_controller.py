@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from asibot.errors import RpcError
-from asibot.kinematics.controller import MOVJ, MOVJV, MOVV, NOT_CONTROLLING, Controller
-from asibot.kinematics.pointer import PointerInput, pointer_velocity
+from asibot.kinematics.controller import MOVJ, MOVJV, MOVV, NOT_CONTROLLING, POINTER, Controller
+from asibot.kinematics.pointer import PointerInput, pointer_motion
 
 from .robot_under_test import asibot_model, asibot_spec
 
@@ -81,6 +81,28 @@ def test_movv_integrates_and_lapses_after_watchdog():
     assert np.allclose(ref.velocities, 0)
 
 
+def test_a_stream_restarted_continues_from_its_reference_not_from_the_lag_behind_it():
+    """A phone's late messages make its stream lapse and restart; the arm lags its reference
+    (gravity): each restart from the measured joints would let the tip sink by that lag."""
+    c = ready()
+    c.stream(np.array([0.05, 0, 0, 0, 0]), 0.0)
+    c.tick(0.0)
+    ref = np.array(c.tick(0.1).positions)
+    c.tick(0.4)                                              # lapsed
+    assert c.state == NOT_CONTROLLING and c.outcome.code == "timeout"
+    sagging = ref + np.radians([0, 0.5, 0.5, 0, 0])        # the arm, a little behind its reference
+    c.on_arm_state(sagging, "")
+    c.stream(np.array([0.0, 0, 0, 0, 0]), 0.5)              # restarted, holding still
+    assert np.allclose(c.tick(0.5).positions, ref)
+    assert np.allclose(c.tick(0.6).positions, ref)
+    # an arm far from the reference (moved otherwise meanwhile) starts where it is
+    elsewhere = ref + np.radians([0, 5, 0, 0, 0])
+    c.tick(0.9)
+    c.on_arm_state(elsewhere, "")
+    c.stream(np.array([0.0, 0, 0, 0, 0]), 1.0)
+    assert np.allclose(c.tick(1.0).positions, elsewhere)
+
+
 def test_movjv_moves_one_joint_stops_at_its_limit_and_lapses():
     c = ready()
     c.stream(np.radians([10.0, 0, 0, 0, 0]), 0.0, MOVJV)
@@ -121,9 +143,31 @@ def test_pointer_input_validation_and_direction():
     with pytest.raises(RpcError):
         PointerInput.from_request({"deadman": True, "yaw": float("nan")})
     pose = np.array([0.5, 0.0, 1.0, math.pi / 2, 0.0])  # tool pointing along +x
-    v = pointer_velocity(pose, PointerInput.from_request({"deadman": True, "direction": "forward"}))
-    assert v[0] == pytest.approx(0.05) and abs(v[2]) < 1e-12
-    v = pointer_velocity(pose, PointerInput.from_request({"deadman": True, "direction": "backward"}))
+    v, turn = pointer_motion(pose, PointerInput.from_request({"deadman": True, "direction": "forward"}))
+    assert v[0] == pytest.approx(0.05) and abs(v[2]) < 1e-12 and turn == 0.0
+    v, turn = pointer_motion(pose, PointerInput.from_request({"deadman": True, "direction": "backward"}))
     assert v[0] == pytest.approx(-0.05)
-    v = pointer_velocity(pose, PointerInput.from_request({"deadman": True, "yaw": 10.0}))
-    assert v[1] == pytest.approx(0.5 * math.radians(10.0)) and v[0] == pytest.approx(0.0)
+    v, turn = pointer_motion(pose, PointerInput.from_request({"deadman": True, "yaw": 10.0}))
+    assert turn == pytest.approx(math.radians(10.0)) and np.allclose(v, 0)
+
+
+@pytest.mark.parametrize("period", [0.01, 0.1])
+def test_a_pointer_turning_a_quarter_turn_keeps_the_tip_at_its_reach_and_height(period):
+    """The seed's dRotZ turns the point about the base axis: at a slow control rate too (a
+    loaded machine), the tip stays on its circle instead of spiralling out (the yaw as a
+    tangent velocity took it 5 cm out in a quarter turn at 10 Hz)."""
+    c = ready()
+    start = c.model.fwd(Q0)
+    cmd = PointerInput.from_request({"deadman": True, "yaw": 45.0})
+    t = 0.0
+    while t < 2.0 - 1e-9:                       # 45 deg/s for 2 s
+        pose = c.model.fwd(c.q)
+        v, turn = pointer_motion(pose, cmd)
+        c.stream(v, t, POINTER, turn=turn)
+        ref = c.tick(t)
+        c.on_arm_state(np.array(ref.positions), "")
+        t += period
+    end = c.model.fwd(c.q)
+    assert math.hypot(*end[:2]) == pytest.approx(math.hypot(*start[:2]), abs=1e-3)
+    assert end[2] == pytest.approx(start[2], abs=1e-3)
+    assert 30.0 < math.degrees(math.atan2(end[1], end[0])) <= 90.0 + 0.5   # the base's top speed slows it

@@ -801,6 +801,13 @@ def stat(stack) -> dict:
     return stack.bus.call(keys.cart_rpc(ROBOT, "stat"), timeout=5)
 
 
+def pointer_says(page, stack) -> str:
+    """What the page and the controller say now, for a failure's message."""
+    status = page.get_by_role("region", name="Handheld pointer").get_by_role("status").first.inner_text()
+    return (f"the controller: {stat(stack)}; the page: {status!r}, {page.locator('.deadman').inner_text()!r}, "
+            f"notice {page.locator('#notice').inner_text()!r}")
+
+
 def reach(point) -> float:
     return math.hypot(point[0], point[1])
 
@@ -825,7 +832,10 @@ def pointer(browser, kitchen):
     # further out)
     kitchen.bus.call(keys.driver_rpc(ROBOT, "reset_world"), {}, timeout=10)
     kitchen.bus.call(keys.cart_rpc(ROBOT, "movj"), {"joints": POINTER_START, "speed": 1.0}, timeout=5)
-    wait_until(lambda: stat(kitchen)["state"] == "not_controlling", timeout=20, interval=0.1)
+    # there: the motion's plan ends before the arm has caught up with it
+    wait_until(lambda: stat(kitchen)["state"] == "not_controlling"
+               and max(abs(a - b) for a, b in zip(stat(kitchen)["joints"], POINTER_START)) < 0.5,
+               timeout=30, interval=0.1, message=lambda: f"the arm did not reach {POINTER_START}: {stat(kitchen)}")
     try:
         yield page
     finally:
@@ -876,9 +886,9 @@ def test_a_tilted_phone_with_the_toggled_deadman_drives_the_tip_and_stops_when_l
     page.keyboard.down("Space")
     try:
         wait_until(lambda: reach(stat(kitchen)["point"]) > reach(start) + 0.01, timeout=10, interval=0.1,
-                   message="Forward with a level phone did not move the tip out")
+                   message=lambda: f"Forward with a level phone did not move the tip out of {start}; {pointer_says(page, kitchen)}")
         wait_until(lambda: azimuth(stat(kitchen)["point"]) > azimuth(start) + math.radians(2), timeout=10, interval=0.1,
-                   message="tipping the phone left did not turn the arm counter-clockwise")
+                   message=lambda: f"tipping the phone left did not turn the arm counter-clockwise from {start}; {pointer_says(page, kitchen)}")
         screenshot(page, "pointer-phone-moving")
     finally:
         page.keyboard.up("Space")
@@ -979,7 +989,7 @@ class PhoneHand:
         timeout *= self.PATIENCE
         deadline = time.monotonic() + timeout
         while not done(self.point()):
-            assert time.monotonic() < deadline, f"{what}: not done within {timeout} s; the tool is at {self.point()}"
+            assert time.monotonic() < deadline, f"{what}: not done within {timeout} s; {pointer_says(self.page, self.kitchen)}"
             self.tilt(beta, self.facing(azimuth_deg))
             self.hold(button)
             self.page.wait_for_timeout(100)

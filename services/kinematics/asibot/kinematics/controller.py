@@ -37,6 +37,7 @@ one, so that a step refused changes nothing.
 
 from __future__ import annotations
 
+import math
 import threading
 from dataclasses import dataclass
 from typing import Any, Protocol, Sequence
@@ -58,6 +59,9 @@ MOVJV = "movjv"
 POINTER = "pointer"
 STREAMS = (MOVV, MOVJV, POINTER)
 STATES = (NOT_CONTROLLING, MOVJ, MOVL) + STREAMS
+#: rad: a new stream continues from the held reference when every joint is this close to it
+#: (a servo's lag under load, well under a jog step); farther, the arm was moved otherwise.
+CONTINUE_WITHIN = np.radians(2.0)
 
 
 class Model(Protocol):
@@ -119,6 +123,7 @@ class Controller:
         self._hold: np.ndarray | None = None
         self._stream_pose: np.ndarray | None = None
         self._stream_vel = np.zeros(0)
+        self._stream_turn = 0.0                 # rad/s about the base axis (stream)
         self.watchdog = Watchdog()     # a streamed motion lapses when its requests stop
         self._last_tick: float | None = None
         self._send_hold = False
@@ -267,10 +272,11 @@ class Controller:
             self._start(planned.state, planned.plan, now, planned.jog)
             return planned.plan.duration
 
-    def stream(self, velocity: np.ndarray, now: float, mode: str = MOVV) -> None:
+    def stream(self, velocity: np.ndarray, now: float, mode: str = MOVV, *, turn: float = 0.0) -> None:
         """Set or refresh a streamed velocity (SI): of the pose, or of the joints in mode MOVJV;
-        it lapses after COMMAND_WATCHDOG_S seconds. Refused ("busy") when it continues a
-        stream from before a recovery (see the module's docstring)."""
+        it lapses after COMMAND_WATCHDOG_S seconds. `turn` (rad/s, counter-clockwise) turns the
+        pose's position about the base's vertical axis as well (the pointer's yaw). Refused
+        ("busy") when it continues a stream from before a recovery (see the module's docstring)."""
         with self._lock:
             may_move = self.arming.admit("stream", now)   # noted even when refused below
             q0 = self.check_can_move()
@@ -286,13 +292,27 @@ class Controller:
                 raise RpcError("bad_request", f"A velocity needs {size} finite numbers.")
             if self.state != mode:
                 self._bump(RpcError("busy", f"A {mode}"))
-                self._stream_pose = np.asarray(self.model.fwd(q0), float)
-                self._hold = q0
+                start = self._continued(q0)
+                self._stream_pose = np.asarray(self.model.fwd(start), float)
+                self._hold = start
                 self._last_tick = None
                 self.outcome = None
+            if not math.isfinite(turn) or (turn and mode == MOVJV):
+                raise RpcError("bad_request", "A turn needs a finite rate, in a stream of poses.")
             self.state = mode
-            self._stream_vel = v
+            self._stream_vel, self._stream_turn = v, float(turn)
             self.watchdog.feed(now)
+
+    def _continued(self, measured: np.ndarray) -> np.ndarray:
+        """Where a new stream starts: the reference the arm is holding when the arm is close to
+        it, else where the arm is. An arm under load lags its reference (gravity, the servo);
+        a stream started from the lagging measurement moves the reference back to it, and a
+        stream restarted again and again (a phone's messages late on Wi-Fi, each lapse a
+        restart) would let the tip sink a lag at every restart."""
+        hold = self._hold
+        if hold is not None and hold.shape == measured.shape and np.max(np.abs(hold - measured)) <= CONTINUE_WITHIN:
+            return hold.copy()
+        return measured
 
     def stop(self) -> None:
         """Stop any motion; the arm holds its last reference. With no motion of its own running,
@@ -338,14 +358,14 @@ class Controller:
             raise RuntimeError("a stream state without its start: stream() sets both before entering one")
         if self.state == MOVJV:
             return self._joint_stream_tick(hold, dt)
-        target = pose + self._stream_vel * dt
+        target = self._advance(pose, dt)
         q = self._solve(target, hold)
         if q is None:
             return self._stream_refused(hold)
         qdot = (q - hold) / dt if dt > 0 else np.zeros(self.n)
         over = float(np.max(np.abs(qdot) / self.vmax))
         if over > 1.0:  # near a singularity: slow the stream down instead of exceeding joint speeds
-            target = pose + self._stream_vel * dt / (over * 1.05)
+            target = self._advance(pose, dt / (over * 1.05))
             q = self._solve(target, hold)
             if q is None:
                 return self._stream_refused(hold)
@@ -354,6 +374,14 @@ class Controller:
                 return self._stream_refused(hold)
         self._stream_pose, self._hold = target, q
         return Reference(q.tolist(), qdot.tolist())
+
+    def _advance(self, pose: np.ndarray, dt: float) -> np.ndarray:
+        """The streamed pose `dt` seconds on: turned about the base axis, then moved."""
+        target = pose + self._stream_vel * dt
+        if self._stream_turn:
+            c, s = math.cos(self._stream_turn * dt), math.sin(self._stream_turn * dt)
+            target[0], target[1] = c * target[0] - s * target[1], s * target[0] + c * target[1]
+        return target
 
     def _joint_stream_tick(self, hold: np.ndarray, dt: float) -> Reference:
         """Joints at their streamed speeds (capped at each joint's maximum), stopping at the limits."""

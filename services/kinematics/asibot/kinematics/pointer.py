@@ -44,21 +44,21 @@ class PointerInput:
         return cls(**vars(requests.POINTER.parse("pointer", req)))
 
 
-def pointer_velocity(pose: np.ndarray, cmd: PointerInput) -> np.ndarray:
-    """SI velocity of the ASIBOT 5-pose [x, y, z, rot(y'), rot(z'')] for one pointer input.
+def pointer_motion(pose: np.ndarray, cmd: PointerInput) -> tuple[np.ndarray, float]:
+    """SI velocity of the ASIBOT 5-pose [x, y, z, rot(y'), rot(z'')] for one pointer input, and
+    the rate at which the whole point turns about the base axis (rad/s, counter-clockwise).
 
     The tool axis is Rz(azimuth)·Ry(rot(y')) applied to z; forward moves along it (towards
     the virtual point), backward away from it. The yaw rate turns the whole point about the
-    base axis, as the seed's dRotZ did.
+    base axis, as the seed's dRotZ did; it is a turn and not a velocity, so the controller
+    turns the point exactly: a velocity tangent to the circle, integrated step by step, spirals
+    outwards (5 cm over a quarter turn at 10 Hz).
     """
     x, y, z, pitch = (float(v) for v in pose[:4])
     azimuth = math.atan2(y, x)
     axis = np.array([math.cos(azimuth) * math.sin(pitch), math.sin(azimuth) * math.sin(pitch), math.cos(pitch)])
     v = np.zeros(len(pose))
     v[:3] = axis * cmd.speed * DIRECTIONS[cmd.direction]
-    wz = math.radians(cmd.yaw)
-    v[0] += -wz * y
-    v[1] += wz * x
     if cmd.pitch is not None:
         v[3] = PITCH_GAIN * (math.radians(cmd.pitch) - pitch)
-    return v
+    return v, math.radians(cmd.yaw)

@@ -40,7 +40,7 @@ from asibot.verbs import Verb
 
 from . import requests
 from .controller import MOVJ, MOVJV, MOVL, MOVV, POINTER, Controller
-from .pointer import PointerInput, pointer_velocity
+from .pointer import PointerInput, pointer_motion
 from .requests import MAX_WAIT
 
 log = logging.getLogger(__name__)
@@ -234,7 +234,8 @@ class KinematicsServer(Service):
         if self.model.pose_size != 5:
             raise RpcError("bad_request", "The pointer mode needs the ASIBOT 5-element pose.")
         pose = np.asarray(self.model.fwd(self._measured()), float)
-        self.ctl.stream(pointer_velocity(pose, cmd), self.clock(), POINTER)
+        velocity, turn = pointer_motion(pose, cmd)
+        self.ctl.stream(velocity, self.clock(), POINTER, turn=turn)
         self._send()
         return {"state": self.ctl.state}
 

@@ -44,6 +44,8 @@ TICK_S = 0.01
 """Physics batch: 5 steps of 2 ms; the arm state goes out once per batch (100 Hz)."""
 CATCH_UP_S = 0.05
 """Most simulated time run in one batch to catch up with the wall clock."""
+RESET_WAIT_S = 2.0
+"""Longest wait for the reset world to be published before reset_world answers anyway."""
 CAMERA_KINDS = {"front": ("depth",), "back": ("depth",), "rgb": ("rgb",), "kitchen": ("depth", "rgb")}
 """What each camera of the worlds produces (camera names are those of worlds/*.xml)."""
 
@@ -111,6 +113,8 @@ class SimService(Service):
             self._cameras_ready.set()
         self._frames = 0
         self._rtf = 0.0
+        self._published = 0                       # physics ticks published, under _tick_done
+        self._tick_done = threading.Condition()
         commands = [command("arm", self.sim.command_arm, lambda c: self.sim.heard("arm", c)),
                     command("gripper", lambda cmd: self.sim.command_gripper(cmd.opening))]
         if sim.base:
@@ -134,7 +138,15 @@ class SimService(Service):
         return {}
 
     def _reset_world(self, a: Any) -> dict:
-        self.sim.reset_world()
+        """Reset, then answer once the reset world has been published: a controller asked to
+        move right after the answer then plans from where the arm is now, not where it was
+        (the arm jumps home; a plan from before the jump would yank it back)."""
+        with self._tick_done:
+            self.sim.reset_world()
+            # the next tick's state may have been read before the reset; the one after is not
+            after = self._published + 2
+        with self._tick_done:
+            self._tick_done.wait_for(lambda: self._published >= after or self.stop_event.is_set(), timeout=RESET_WAIT_S)
         return {}
 
     def _set_object_pose(self, a: Any) -> dict:
@@ -183,6 +195,9 @@ class SimService(Service):
                     self.sim.step(n)
                 tick += 1
                 self._publish(tick)
+                with self._tick_done:
+                    self._published = tick
+                    self._tick_done.notify_all()
                 if tick % 100 == 0:
                     wall = time.monotonic()
                     self._rtf = (self.sim.time - sim0) / max(wall - wall0, 1e-9)
