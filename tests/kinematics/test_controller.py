@@ -46,7 +46,40 @@ def test_movj_references_then_done_and_busy_meanwhile():
     assert np.all(np.array(mid.velocities) > 0)
     last = c.tick(10.0 + T + 0.01)
     assert np.allclose(last.positions, Q0 + 0.2)
-    assert c.state == NOT_CONTROLLING and c.wait(0.0) and c.outcome is None
+    assert c.state == NOT_CONTROLLING and c.outcome is None
+    assert not c.wait(0.0)                       # the plan is over; the arm is not there yet
+    c.on_arm_state(Q0 + 0.2 - np.radians(0.3), "")
+    assert c.wait(0.0)
+
+
+def test_wait_ends_when_the_arm_arrives_or_a_while_after_the_plan_or_at_a_stop(monkeypatch):
+    import threading
+    import time
+    from asibot.kinematics import controller
+    monkeypatch.setattr(controller, "SETTLE_S", 1.0)
+    c = ready()
+    T = c.movj(Q0 + 0.2, 0.0)
+    c.tick(T + 0.01)
+    waited: list[float] = []
+    waiter = threading.Thread(target=lambda: waited.append(c.wait(5.0) and time.monotonic()))
+    t0 = time.monotonic()
+    waiter.start()
+    c.on_arm_state(Q0 + 0.1, "")                   # on its way
+    time.sleep(0.05)
+    assert not waited
+    c.on_arm_state(Q0 + 0.2, "")                   # there
+    waiter.join(2.0)
+    assert waited and waited[0] - t0 < 0.9      # woken by the arrival, not at SETTLE_S
+    # an arm that never gets there (pushing on something): done SETTLE_S after the plan
+    c.movj(Q0, 0.0)
+    c.tick(T + 0.01)
+    t0 = time.monotonic()
+    assert c.wait(5.0) and time.monotonic() - t0 >= 0.95
+    # a stop: nothing to catch up with
+    c.movj(Q0 + 0.2, 0.0)
+    c.tick(T + 0.01)
+    c.stop()
+    assert c.wait(0.0)
 
 
 def test_out_of_limit_joint_target_is_refused():

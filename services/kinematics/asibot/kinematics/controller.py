@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from dataclasses import dataclass
 from typing import Any, Protocol, Sequence
 
@@ -62,6 +63,12 @@ STATES = (NOT_CONTROLLING, MOVJ, MOVL) + STREAMS
 #: rad: a new stream continues from the held reference when every joint is this close to it
 #: (a servo's lag under load, well under a jog step); farther, the arm was moved otherwise.
 CONTINUE_WITHIN = np.radians(2.0)
+#: rad: `wait` counts the arm arrived when every joint is this close to the motion's end
+#: (the sim's servo rests within 0.5 degrees of its reference under gravity).
+SETTLED_WITHIN = np.radians(0.5)
+#: s: `wait` waits at most this long after a plan's end for the arm to catch up (an arm pushing
+#: on something never does; the motion is over all the same).
+SETTLE_S = 3.0
 
 
 class Model(Protocol):
@@ -127,6 +134,9 @@ class Controller:
         self.watchdog = Watchdog()     # a streamed motion lapses when its requests stop
         self._last_tick: float | None = None
         self._send_hold = False
+        # The end of the last planned motion while the arm catches up with it (see wait).
+        self._settle: np.ndarray | None = None
+        self._settle_by = 0.0
         # Bumped by everything that must cancel a motion being planned (stop, estop, fault,
         # driver loss, another motion), with what it was, for the refusal's sentence.
         self._epoch = 0
@@ -142,6 +152,7 @@ class Controller:
             if q.shape != (self.n,) or not np.all(np.isfinite(q)):
                 return
             self.q = q
+            self._check_settled()
             if fault and not self.fault:
                 self._cancel(RpcError("fault", f"The arm reports a fault: {fault} Reset it, then retry."),
                              "A fault of the arm")
@@ -292,6 +303,7 @@ class Controller:
                 raise RpcError("bad_request", f"A velocity needs {size} finite numbers.")
             if self.state != mode:
                 self._bump(RpcError("busy", f"A {mode}"))
+                self._settle = None
                 start = self._continued(q0)
                 self._stream_pose = np.asarray(self.model.fwd(start), float)
                 self._hold = start
@@ -325,9 +337,24 @@ class Controller:
                 self._send_hold = True
 
     def wait(self, timeout: float | None) -> bool:
-        """Block until no planned motion runs; False on timeout (the motion keeps running)."""
+        """Block until no planned motion runs and the arm has caught up with the end of the last
+        one (every joint within SETTLED_WITHIN, or SETTLE_S after the plan's end, whichever
+        comes first); False on timeout (the motion keeps running). A program that closes the
+        gripper after `wait` closes it where the arm is meant to be: the plan ends before the
+        arm, which lags it (1.8 degrees on a loaded machine)."""
+        end = None if timeout is None else time.monotonic() + timeout
         with self._lock:
-            return self._done.wait_for(lambda: self.state not in (MOVJ, MOVL), timeout)
+            while True:
+                now = time.monotonic()
+                planned = self.state in (MOVJ, MOVL)
+                if not planned and (self._settle is None or now >= self._settle_by):
+                    return True
+                wake = self._settle_by if not planned else math.inf
+                if end is not None:
+                    if now >= end:
+                        return False
+                    wake = min(wake, end)
+                self._done.wait(None if wake == math.inf else wake - now)
 
     # --- the loop -----------------------------------------------------------------------
     def tick(self, now: float) -> Reference | None:
@@ -418,6 +445,7 @@ class Controller:
 
     def _start(self, state: str, plan: trajectory.JointPlan, now: float, jog: np.ndarray | None) -> None:
         self._bump(RpcError("busy", f"A {state}"))
+        self._settle = None
         self.outcome = None
         self._plan, self._t0, self.state = plan, now, state
         self._jog = None if jog is None else np.array(jog, float)   # a copy: the caller keeps its own
@@ -425,10 +453,20 @@ class Controller:
 
     def _finish(self, q: np.ndarray) -> None:
         self._plan, self._jog, self._hold, self.state = None, None, q, NOT_CONTROLLING
+        self._settle, self._settle_by = q, time.monotonic() + SETTLE_S
+        self._check_settled()
         self._done.notify_all()
 
+    def _check_settled(self) -> None:
+        """Forget the target the arm was catching up with once it is there (wakes `wait`)."""
+        if self._settle is not None and self.q is not None and np.max(np.abs(self.q - self._settle)) <= SETTLED_WITHIN:
+            self._settle = None
+            self._done.notify_all()
+
     def _abort(self, why: RpcError | None) -> None:
+        self._settle = None                      # stopped short: there is nothing to catch up with
         if self.state == NOT_CONTROLLING:
+            self._done.notify_all()
             return
         if self._plan is not None and self.q is not None:
             self._hold = self.q.copy()

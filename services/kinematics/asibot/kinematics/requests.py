@@ -99,7 +99,7 @@ def verbs(n_joints: int) -> dict[str, Verb]:
                      doc="a joint-space move to the arm's home posture"),
         "stop": Verb(strict=False, doc="stop the arm, whoever moved it"),
         "wait": Verb({"timeout": Field(Number(0.0, MAX_WAIT_REQUEST, "s", open_low=True), default=MAX_WAIT)},
-                     doc="wait until the motion ends (done) or the timeout passes"),
+                     doc="wait until the motion ends and the arm has caught up with its end (done), or the timeout passes"),
         "tool": Verb({"tool": Field(tool, also="or null to remove it")},
                      doc="attach a tool frame: points are the tool point's from then on"),
         "act": Verb({"action": Field(OneOf(("open", "close")), required=True)},
