@@ -301,6 +301,8 @@ class Controller:
             size = self.n if mode == MOVJV else self.model.pose_size
             if v.shape != (size,) or not np.all(np.isfinite(v)):
                 raise RpcError("bad_request", f"A velocity needs {size} finite numbers.")
+            if not math.isfinite(turn) or (turn and mode == MOVJV):
+                raise RpcError("bad_request", "A turn needs a finite rate, in a stream of poses.")
             if self.state != mode:
                 self._bump(RpcError("busy", f"A {mode}"))
                 self._settle = None
@@ -309,8 +311,6 @@ class Controller:
                 self._hold = start
                 self._last_tick = None
                 self.outcome = None
-            if not math.isfinite(turn) or (turn and mode == MOVJV):
-                raise RpcError("bad_request", "A turn needs a finite rate, in a stream of poses.")
             self.state = mode
             self._stream_vel, self._stream_turn = v, float(turn)
             self.watchdog.feed(now)
