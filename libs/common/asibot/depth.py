@@ -58,6 +58,11 @@ class Intrinsics:
     cy: float
 
     @classmethod
+    def of(cls, info: CameraInfo) -> "Intrinsics":
+        """The intrinsics a CameraInfo carries."""
+        return cls(info.width, info.height, info.fx, info.fy, info.cx, info.cy)
+
+    @classmethod
     def from_fovy(cls, width: int, height: int, fovy_deg: float) -> "Intrinsics":
         if width < 2 or height < 2:
             raise ValueError("camera resolution must be at least 2x2 pixels")

@@ -125,7 +125,7 @@ class DepthToScan:
         bearing = np.arctan2(dy, dx)
         # Level camera: along each column the bearing and the horizontal scale hn are those of
         # the middle row, so the smallest z of a column is its nearest return.
-        row = int(np.clip(round(rays.cy), 0, rays.height - 1))
+        row = int(np.clip(round(rays.lens.cy), 0, rays.lens.height - 1))
         spread = _circular_spread(bearing, usable, axis=0)
         hn_dev = np.where(usable, np.abs(hn - hn[row]) / np.maximum(hn[row], 1e-9), 0.0)
         level = bool(np.all(spread <= config.bin_width / 2) and np.all(hn_dev <= 1e-4))
@@ -190,11 +190,12 @@ def centre_rows(depth: np.ndarray, rays: CameraRays, scan_height: int = 1, range
     """depthimage_to_laserscan itself, as the reference: (angles, ranges) in the camera's frame
     (x forward, angles counter-clockwise, one per column, left of the image = largest angle)
     from the `scan_height` rows around cy; r = hypot(x, z), NaN where no valid return."""
-    if scan_height < 1 or scan_height // 2 > rays.cy or scan_height // 2 > rays.height - rays.cy:
-        raise BadInput(f"scan_height {scan_height} does not fit around cy = {rays.cy} in a "
-                       f"{rays.height}-row image.")
-    top = int(rays.cy - scan_height // 2)
-    a = (np.arange(rays.width) - rays.cx) / rays.fx
+    lens = rays.lens
+    if scan_height < 1 or scan_height // 2 > lens.cy or scan_height // 2 > lens.height - lens.cy:
+        raise BadInput(f"scan_height {scan_height} does not fit around cy = {lens.cy} in a "
+                       f"{lens.height}-row image.")
+    top = int(lens.cy - scan_height // 2)
+    a = (np.arange(lens.width) - lens.cx) / lens.fx
     band = depth[top:top + scan_height].astype(np.float32)
     r = band * np.sqrt(1 + a * a).astype(np.float32)
     ok = (band > 0) & (r >= range_min) & (r <= range_max)

@@ -110,9 +110,9 @@ def find(bgr: np.ndarray, color: str, rgb: CameraRays, clouds: Sequence[np.ndarr
     """The `find` RPC's answer: {"found", "point" (base frame, m), "pixels", "depth_points"} or
     {"found": False, "pixels", "message"} with a sentence saying what to do."""
     color = check_color(color)
-    if bgr.shape[:2] != (rgb.height, rgb.width):
+    if bgr.shape[:2] != (rgb.lens.height, rgb.lens.width):
         raise BadInput(f"the RGB image is {bgr.shape[1]}x{bgr.shape[0]} but its CameraInfo says "
-                       f"{rgb.width}x{rgb.height}.")
+                       f"{rgb.lens.width}x{rgb.lens.height}.")
     blob = find_blob(bgr, color, min_pixels)
     if blob is None:
         return {"found": False, "pixels": 0,

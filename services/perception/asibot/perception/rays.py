@@ -20,20 +20,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from asibot.depth import Intrinsics, quaternion_matrix
 from asibot.messages import CameraInfo
 from asibot.perception.errors import BadInput
 
 MAX_SIDE = 8192
 """Largest image side accepted; anything bigger is a corrupted CameraInfo, not a camera."""
-
-
-def quaternion_matrix(w: float, x: float, y: float, z: float) -> np.ndarray:
-    """The 3x3 rotation of a unit quaternion (w, x, y, z)."""
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
 
 
 def check_info(info: CameraInfo, name: str = "the camera") -> None:
@@ -68,12 +60,7 @@ def check_info(info: CameraInfo, name: str = "the camera") -> None:
 class CameraRays:
     """One camera: intrinsics, pose on the robot, and the base-frame ray of every pixel."""
 
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
+    lens: Intrinsics
     rotation: np.ndarray       # 3x3, optical frame -> base frame
     position: np.ndarray       # (3,), optical centre in the base frame, m
     direction: np.ndarray      # (3, H, W) float64: base-frame ray per pixel, optical z = 1
@@ -82,17 +69,16 @@ class CameraRays:
     @classmethod
     def from_info(cls, info: CameraInfo, name: str = "the camera") -> "CameraRays":
         check_info(info, name)
-        w, h = info.width, info.height
+        lens = Intrinsics.of(info)
         q = np.asarray(info.pose[3:], float)
         rot = quaternion_matrix(*(q / np.linalg.norm(q)))
-        a = (np.arange(w) - info.cx) / info.fx          # optical x / z per column
-        b = (np.arange(h) - info.cy) / info.fy          # optical y / z per row
+        a = (np.arange(lens.width) - lens.cx) / lens.fx          # optical x / z per column
+        b = (np.arange(lens.height) - lens.cy) / lens.fy         # optical y / z per row
         # direction = rot @ (a, b, 1), built from outer sums instead of an (H, W, 3) matmul
         direction = (rot[:, 0, None, None] * a[None, None, :]
                      + rot[:, 1, None, None] * b[None, :, None]
                      + rot[:, 2, None, None])
-        return cls(w, h, info.fx, info.fy, info.cx, info.cy, rot, np.asarray(info.pose[:3], float),
-                   np.ascontiguousarray(direction), _key(info))
+        return cls(lens, rot, np.asarray(info.pose[:3], float), np.ascontiguousarray(direction), _key(info))
 
     def same(self, info: CameraInfo) -> bool:
         """Whether `info` describes this very camera (CameraInfo arrives with every frame)."""
@@ -114,8 +100,8 @@ class CameraRays:
         local = (points - self.position) @ self.rotation        # = rotation.T @ (p - position)
         z = local[:, 2]
         with np.errstate(divide="ignore", invalid="ignore"):
-            u = self.fx * local[:, 0] / z + self.cx
-            v = self.fy * local[:, 1] / z + self.cy
+            u = self.lens.fx * local[:, 0] / z + self.lens.cx
+            v = self.lens.fy * local[:, 1] / z + self.lens.cy
         return u, v, z
 
     def check_depth(self, depth: object, name: str = "the camera") -> np.ndarray:
@@ -123,9 +109,9 @@ class CameraRays:
         an inf or a negative value refuses the whole frame (0 is 'no return')."""
         if not isinstance(depth, np.ndarray):
             raise BadInput(f"the depth image of {name} is a {type(depth).__name__}, not an array.")
-        if depth.shape != (self.height, self.width):
+        if depth.shape != (self.lens.height, self.lens.width):
             raise BadInput(f"the depth image of {name} is {'x'.join(map(str, depth.shape))} but its "
-                           f"CameraInfo says {self.height}x{self.width} (rows x columns): the camera "
+                           f"CameraInfo says {self.lens.height}x{self.lens.width} (rows x columns): the camera "
                            "and its CameraInfo disagree.")
         if depth.dtype not in (np.float32, np.float64):
             raise BadInput(f"the depth image of {name} holds {depth.dtype}; it must hold float32 "

@@ -141,7 +141,7 @@ class PerceptionService(Service):
             self.bus.reject(keys.camera_info(self.robot, name), exc)
             self._cams[name] = _Camera(info_error=str(exc), rejected=cam.rejected + 1)
             return
-        log.info("%s camera: %dx%d, %s", name, rays.width, rays.height,
+        log.info("%s camera: %dx%d, %s", name, rays.lens.width, rays.lens.height,
                  f"scan by {converter.mode}" if converter else "colour only")
         self._cams[name] = _Camera(rays=rays, converter=converter, rejected=cam.rejected)
 
@@ -252,7 +252,7 @@ class PerceptionService(Service):
             for c in self.opt.depth_cameras:
                 d = self._cams[c]
                 if d.rays is not None and d.depth is not None and abs(d.depth_received - rgb[1]) <= DEPTH_SYNC_S:
-                    clouds.append(d.rays.points(d.depth, stride=max(1, d.rays.width // 320)))
+                    clouds.append(d.rays.points(d.depth, stride=max(1, d.rays.lens.width // 320)))
             return finder.find(bgr, color, cam.rays, clouds)
         except BadInput as exc:
             raise RpcError("unavailable", f"The {name} camera's image cannot be used: {_sentence(exc)}") from None
