@@ -1,7 +1,8 @@
 """Programs without Python (issue 27, point 3) in Debian's chromium against the kitchen: a
 program made from the "Pick it up" template at one captured point with no code typed, a step
 added with the keyboard, saved, shown as Python, run, and the red can lifted (the sim's truth);
-then the program edited as Python says its steps are no longer in sync and keeps both."""
+then the program edited as Python says its steps are no longer in sync and keeps both. The same
+editor by one switch: a program made, a step added and moved, saved."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from asibot.testing import wait_until
 from asibot.web import steps
 
 from .conftest import http, screenshot
+from .switch import Presses, with_settings
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(400)]
 
@@ -98,3 +100,30 @@ def test_pick_it_up_from_the_template_with_no_code_typed(page, kitchen):
     versions = http(kitchen, "GET", "/api/programs/give_me_the_can")["versions"]
     assert len(versions) >= 2      # the edited Python is kept as a previous version
     sim.reset_world()
+
+
+def test_the_steps_editor_with_one_switch(page, kitchen):
+    """Every step is reachable by one switch (issue 27, point 3): a "Pick it up" program from a
+    point, a Wait added at the end and moved up before the lift, saved; Space alone, step scanning."""
+    kitchen.data.mkdir(exist_ok=True)
+    (kitchen.data / "points.ini").write_text(f"grasp-can {' '.join(repr(v) for v in AT_THE_CAN)}\n")
+    before = set(http(kitchen, "GET", "/api/programs")["programs"])
+    with_settings(page, "#program", ".cm-content", enabled=True)
+    switch = Presses(page)
+    switch.start()
+    switch.to("New: Pick it up…")
+    switch.to("Choose point grasp-can")
+    listed = page.get_by_role("list", name="Steps")
+    listed.locator(".step-sentence").nth(4).wait_for(timeout=10000)
+    (name,) = set(http(kitchen, "GET", "/api/programs")["programs"]) - before
+    switch.to("Wait")
+    listed.locator(".step-sentence").nth(5).wait_for(timeout=10000)
+    switch.to("Move step 6 up")
+    page.get_by_text("Unsaved changes").wait_for(timeout=10000)
+    switch.to("Save steps")
+    page.get_by_text("Steps saved").wait_for(timeout=10000)
+    saved = http(kitchen, "GET", f"/api/programs/{name}/steps")
+    assert [s["kind"] for s in saved["steps"]] == ["open", "move", "move", "close", "wait", "move"], saved
+    assert saved["in_sync"]
+    screenshot(page, "steps-one-switch")
+    print(f"\nthe steps editor by one switch: a program, a step added and moved, saved: {switch.count} presses")
