@@ -192,8 +192,9 @@ def logs(up: list[str], env: dict[str, str]) -> str:
 
 
 #: From the host: turn the simulated arm's first joint by 10 degrees, print the joints before and
-#: after. `wait` ends with the planned motion; the measured joint follows it, and in containers on
-#: a loaded machine it was 1.8 degrees behind then: the joint is read until it arrives (30 s at most).
+#: after. `wait` ends once the arm is within 0.5 degrees of the motion's end, or 3 s after the plan's
+#: end (in containers on a loaded machine the joint was 1.8 degrees behind at the plan's end): the
+#: joint is read until it is within the check's 0.5 degrees, 30 s at most.
 MOVE_THE_ARM = """
 import json, time
 from asibot.client import CartesianClient
