@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -31,16 +33,49 @@ pytestmark = pytest.mark.slow
 
 
 class Truth:
-    """The sim's ground-truth pose, kept as a trace."""
+    """The sim's ground-truth pose, kept as a trace; beside it what nav believed and said, for
+    a failure's message."""
 
     def __init__(self, bus) -> None:
         self._lock = threading.Lock()
         self.trace: list[tuple[float, float, float]] = []
+        self.times: list[float] = []
+        self.belief: list[tuple[float, float, float, bool]] = []     # (time, x, y, localised)
+        self.said: list[str] = []                                    # nav's status texts, as they changed
         bus.subscribe(keys.sim_truth(ROBOT), m.Pose2D, self._on)
+        bus.subscribe(keys.nav_pose(ROBOT), m.NavPose, self._on_belief)
+        bus.subscribe(keys.nav_status(ROBOT), m.NavStatus, self._on_status)
 
     def _on(self, p: m.Pose2D) -> None:
         with self._lock:
             self.trace.append((p.x, p.y, p.theta))
+            self.times.append(time.monotonic())
+
+    def _on_belief(self, p: m.NavPose) -> None:
+        with self._lock:
+            self.belief.append((time.monotonic(), p.x, p.y, p.localised))
+
+    def _on_status(self, s: m.NavStatus) -> None:
+        with self._lock:
+            # "driving to fridge, 3.2 m left" changes every tick: a change of words counts
+            if not self.said or re.sub(r"[\d.]+", "#", self.said[-1]) != re.sub(r"[\d.]+", "#", s.text):
+                self.said.append(s.text)
+
+    def drift(self) -> str:
+        """When nav's belief first strayed more than 0.3 m from the truth, and the worst."""
+        with self._lock:
+            times, trace, belief = np.array(self.times), np.array(self.trace), list(self.belief)
+        if len(times) == 0 or not belief:
+            return "no truth or no belief to compare"
+        t0, worst, first = belief[0][0], (0.0, 0.0), None
+        for t, x, y, localised in belief:
+            i = min(int(np.searchsorted(times, t)), len(times) - 1)
+            err = math.hypot(x - trace[i, 0], y - trace[i, 1])
+            if err > 0.3 and first is None:
+                first = f"{t - t0:.1f} s after the start, at ({trace[i, 0]:.2f}, {trace[i, 1]:.2f}), localised: {localised}"
+            worst = max(worst, (err, t - t0))
+        return (f"nav's belief first strayed over 0.3 m {first or 'never'}; the worst: {worst[0]:.2f} m, "
+                f"{worst[1]:.1f} s after the start")
 
     @property
     def pose(self) -> tuple[float, float, float]:
@@ -106,6 +141,29 @@ def standing_still(stack, seconds: float = 0.5) -> bool:
     return d < 0.005 and a < 0.01
 
 
+def where(stack) -> str:
+    """What the sim and nav say now, and what nav said last: for a failure's message (a goal
+    that fails in a loaded CI run is understood from this alone)."""
+    try:
+        believed, status = stack.base.pose(), stack.base.status()
+        nav = f"nav believes ({believed[0]:.2f}, {believed[1]:.2f}, {believed[2]:.2f}), localised: {status['localised']}"
+    except Exception as exc:          # a diagnosis must not hide the failure
+        nav = f"nav did not answer ({exc})"
+    x, y, th = stack.truth.pose
+    events = "\n  ".join(f"{e.code}: {e.text}" for e in stack.events.all()[-8:])
+    said = "\n  ".join(stack.truth.said[-20:])
+    return (f"the sim says the robot is at ({x:.2f}, {y:.2f}, {th:.2f}); {nav}\n{stack.truth.drift()}\n"
+            f"last events:\n  {events}\nnav said last:\n  {said}")
+
+
+def reach(stack, gid: int, timeout: float = 150) -> dict:
+    """The result of goal `gid` once it ended; a failure says where the robot was."""
+    try:
+        return stack.base.wait(gid, timeout=timeout)
+    except RpcError as exc:          # Timeout too
+        raise AssertionError(f"{exc}\n{where(stack)}") from None
+
+
 def test_primitives_end_where_they_should(stack):
     """At the start, in the open: forward 1 m, left 90 deg, right 90 deg, back 0.5 m."""
     x0, y0, _ = stack.truth.pose
@@ -134,7 +192,7 @@ def test_goto_fridge_past_a_box_that_is_not_on_the_map(stack):
     fridge = stack.base.places()["fridge"]
     start = stack.truth.mark()
     gid = stack.base.goto("fridge")
-    result = stack.base.wait(gid, timeout=150)
+    result = reach(stack, gid)
     assert result["state"] == "succeeded" and result["text"] == "arrived at fridge"
     ok, how = on_goal(stack.truth.pose, fridge)
     assert ok, how
@@ -178,7 +236,8 @@ def test_a_goal_inside_a_wall_is_refused_with_a_sentence(stack):
 
 def test_a_new_goal_preempts_and_cancel_stops(stack):
     first = stack.base.goto("desk")
-    wait_until(lambda: not standing_still(stack), 10, interval=0.1, message="the robot never started")
+    wait_until(lambda: not standing_still(stack), 10, interval=0.1,
+               message=lambda: f"the robot never started\n{where(stack)}")
     second = stack.base.goto("charging station")
     with pytest.raises(RpcError, match="replaced by a new goal") as err:
         stack.base.wait(first, timeout=5)
@@ -196,7 +255,7 @@ def test_the_shelf_is_reached_round_the_sofa(stack):
     by the navigator itself (tests/nav/test_navigator.py); the fridge by the tests around this."""
     places = stack.base.places()
     for name in ("shelf",):
-        result = stack.base.wait(stack.base.goto(name), timeout=150)
+        result = reach(stack, stack.base.goto(name))
         assert result["text"] == f"arrived at {name}"
         ok, how = on_goal(stack.truth.pose, places[name])
         assert ok, f"{name}: {how}"
@@ -217,7 +276,7 @@ def test_the_command_line_sends_the_robot_and_lists_places(stack):
     out = nav("turn", "180")          # the station faces the wall
     assert out.returncode == 0 and "turn left: done" in out.stdout, out.stdout + out.stderr
     out = nav("drive", "0.5")
-    assert out.returncode == 0 and "forward: done" in out.stdout, out.stdout + out.stderr
+    assert out.returncode == 0 and "forward: done" in out.stdout, f"{out.stdout}{out.stderr}{where(stack)}"
     out = nav("goto", "by the station")
     assert out.returncode == 0 and "arrived at by the station" in out.stdout, out.stdout + out.stderr
     assert "by the station" in stack.base.places()

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 
+from asibot import messages as m
 from asibot.nav.geometry import Pose
 from asibot.nav.pilot import Pilot
 
@@ -53,3 +54,42 @@ def test_a_stop_with_nothing_driving_sends_nothing(apartment, world_places):
     pilot.stop(now)
     feed(pilot, sim, now)
     assert pilot.tick(now) is None
+
+
+def test_a_goal_stands_still_while_no_scan_comes_and_gives_up_after_blind_timeout(apartment, world_places):
+    """move_base's rule: a costmap that is not current commands no motion. Scans that stop
+    (perception starved or gone) stop the robot with a sentence; it drives on when they come
+    back; without them for `blind_timeout` the goal ends saying why."""
+    sim = TinySim(apartment.grid, pose=START, beams=90, seed=3)
+    sim.odom = START
+    told: list[str] = []
+    pilot = Pilot(apartment.grid, world_places, START, seed=1, on_event=lambda level, code, text: told.append(text))
+    now = drive_a_while(pilot, sim, 0.0, 3)
+    gid = pilot.goto(now, place="fridge")["goal_id"]
+    now = drive_a_while(pilot, sim, now, 20)
+    assert sim.vx > 0.05, "the goal never drove"
+
+    def blind(now: float, seconds: float) -> tuple[float, list]:
+        """Odometry only, for `seconds`; the commands sent."""
+        sent = []
+        for _ in range(int(round(seconds / 0.1))):
+            pilot.odometry(now, m.Odometry(x=sim.odom.x, y=sim.odom.y, theta=sim.odom.theta, vx=sim.vx,
+                                           wz=sim.wz, stamp=int(now * 1e9)))
+            cmd = pilot.tick(now)
+            sent.append(cmd)
+            sim.step(cmd.vx if cmd else 0.0, cmd.wz if cmd else 0.0, 0.1)
+            now += 0.1
+        return now, sent
+
+    now, sent = blind(now, 2.0)
+    # the last scan counts for input_timeout (0.5 s): then every command is a zero
+    assert all(c is not None and (c.vx, c.wz) == (0.0, 0.0) for c in sent[6:]), sent
+    assert pilot.status().text == "waiting: I cannot see obstacles (no scan) on the way to fridge"
+    assert pilot.status().state == "active"
+    now = drive_a_while(pilot, sim, now, 20)
+    assert sim.vx > 0.05, "the goal did not drive on once scans came back"
+    now, sent = blind(now, 11.0)
+    assert pilot.status().state == "aborted"
+    assert pilot.status().text == ("could not reach fridge: I could not see obstacles for 10 s "
+                                   "(no scan: is the perception service running?)")
+    assert pilot.result(gid)["state"] == "aborted" and told[-1].startswith("could not reach fridge")

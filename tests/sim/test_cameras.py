@@ -1,11 +1,21 @@
 """Depth measures known distances (rendered and ray cast alike); RGB and intrinsics are right."""
 
+import time
+
 import cv2
 import mujoco
 import numpy as np
 import pytest
 
+from asibot import keys
+from asibot import messages as m
+from asibot.bus import Bus
 from asibot.sim.cameras import Camera, Intrinsics
+from asibot.sim.service import Options, SimService
+from asibot.sim.simulation import Simulation
+from asibot.testing import wait_until
+
+ROBOT = "pioneer-sim"
 
 
 @pytest.fixture
@@ -67,3 +77,41 @@ def test_kitchen_rgb_is_a_jpeg_showing_the_red_can(kitchen):
 def test_intrinsics_refuse_tiny_images():
     with pytest.raises(ValueError, match="at least"):
         Intrinsics.from_fovy(1, 1, 45)
+
+
+def test_every_image_of_a_frame_is_stamped_when_the_world_was_copied(memory_bus, monkeypatch):
+    """Nav places a scan where the robot was at the scan's stamp. The cameras render one after
+    the other from one copy of the world, 30-80 ms each on a loaded machine (slowed here to
+    40 ms): each image, and its CameraInfo, carries the moment of that copy, not the end of
+    its own render."""
+    copied: list[int] = []
+    copy, render = Simulation.copy_positions, Camera.depth_render
+
+    def copy_and_note(self, out):
+        copy(self, out)
+        copied.append(m.now_ns())
+
+    def slow_render(self, data):
+        time.sleep(0.04)
+        return render(self, data)
+
+    monkeypatch.setattr(Simulation, "copy_positions", copy_and_note)
+    monkeypatch.setattr(Camera, "depth_render", slow_render)
+    svc_bus, user = Bus("sim"), Bus("test")
+    stamps: dict[str, list[int]] = {"front": [], "back": [], "rgb": [], "front info": []}
+    for name in ("front", "back"):
+        user.subscribe(keys.camera_depth(ROBOT, name), m.DepthImage, lambda msg, n=name: stamps[n].append(msg.stamp))
+    user.subscribe(keys.camera_rgb(ROBOT, "rgb"), m.RgbImage, lambda msg: stamps["rgb"].append(msg.stamp))
+    user.subscribe(keys.camera_info(ROBOT, "front"), m.CameraInfo, lambda msg: stamps["front info"].append(msg.stamp))
+    svc = SimService(svc_bus, Simulation(ROBOT, odom_noise=(0.0, 0.0)), Options(camera_hz=5.0))
+    try:
+        wait_until(lambda: all(len(s) >= 3 for s in stamps.values()), 20, message=lambda: f"frames: {stamps}")
+    finally:
+        svc.close()
+        user.close()
+        svc_bus.close()
+    for i in range(3):
+        frame = {name: s[i] for name, s in stamps.items()}
+        assert len(set(frame.values())) == 1, f"frame {i}: {frame}"
+        # the copy is noted a moment after it was made: within 5 ms of the stamp, never 40 ms
+        assert min(abs(frame["front"] - t) for t in copied) < 5_000_000, (frame, copied)

@@ -15,7 +15,9 @@ send (no goal: the base belongs to whoever else drives it). Replanning: every
 finds no safe way for `controller_patience`, a plan that fails, or no progress (0.5 m in
 10 s, nav2's progress checker) starts the next recovery; when they are used up the goal is
 aborted with what was tried. Localisation lost for `lost_timeout` makes the robot turn on the
-spot to find where it is; a whole turn that does not find it aborts.
+spot to find where it is; a whole turn that does not find it aborts. Without a recent scan
+(`seeing` false) the robot stands still, as move_base does when its costmap is not current:
+it cannot see what came into its way; after `blind_timeout` the goal is aborted.
 """
 
 from __future__ import annotations
@@ -62,6 +64,8 @@ class NavParams:
     switch_margin: float = 0.5
     switch_fraction: float = 0.1
     results_kept: int = 50
+    #: s without a recent scan, standing still, before the goal is aborted
+    blind_timeout: float = 10.0
 
 
 @dataclass
@@ -112,6 +116,7 @@ class Navigator:
         self._blocked_since: float | None = None
         self._progress_mark: tuple[float, Pose | None, float] = (0.0, None, math.inf)
         self._lost_since: float | None = None
+        self._blind_since: float | None = None
         self._looking: Spin | None = None      # the turn made to find where the robot is
         self._need_plan = True
         self._send_stop = False
@@ -162,9 +167,10 @@ class Navigator:
     # ------------------------------------------------------------------------------ loop
 
     def step(self, now: float, pose: Pose, scan: LaserScan | None, odom: OdomLike | None,
-             localised: bool = True, scan_pose: Pose | None = None) -> Command | None:
+             localised: bool = True, scan_pose: Pose | None = None, seeing: bool = True) -> Command | None:
         """`scan_pose`: where the robot was when the scan was taken (default `pose`); a scan
-        placed at the pose of its arrival smears walls across doorways while the robot turns."""
+        placed at the pose of its arrival smears walls across doorways while the robot turns.
+        `seeing`: a recent scan came (the costmap shows what is around the robot now)."""
         finite = all(math.isfinite(v) for v in pose)
         at = scan_pose if scan_pose is not None else pose
         if scan is not None and finite and all(math.isfinite(v) for v in at):
@@ -177,6 +183,9 @@ class Navigator:
             return None
         velocity = (float(odom.vx), float(odom.wz)) if odom is not None else (0.0, 0.0)
         label = goal_label(goal, self.status.place)
+        if not seeing:
+            return self._wait_to_see(now, pose, label)
+        self._blind_since = None
         # localisation
         if not (localised and finite):
             return self._find_where_i_am(now, pose, label, finite)
@@ -294,6 +303,19 @@ class Navigator:
                 self._tried[-1] = f"{rec.name} ({step.failed})"
             return Command(0.0, 0.0)
         return Command(step.vx, step.wz)
+
+    def _wait_to_see(self, now: float, pose: Pose, label: str) -> Command:
+        """No recent scan: stand still (a turn or a recovery too), for `blind_timeout`, then
+        abort. The progress clock restarts once scans come back: the wait was not the way's."""
+        self._blind_since = now if self._blind_since is None else self._blind_since
+        blind = now - self._blind_since
+        if blind >= self.params.blind_timeout:
+            return self._abort(f"could not reach {label}: I could not see obstacles for {blind:.0f} s "
+                               "(no scan: is the perception service running?)")
+        self._progress_mark = (now, pose, math.inf)
+        self._blocked_since = None
+        self.status.text = f"waiting: I cannot see obstacles (no scan) on the way to {label}"
+        return Command(0.0, 0.0)
 
     def _find_where_i_am(self, now: float, pose: Pose, label: str, finite: bool) -> Command:
         """The filter spread out on the way (scans that stopped fitting: something not on the map

@@ -23,7 +23,7 @@ Goals and primitives are exclusive: a primitive cancels the running goal and a g
 running primitive, so one thing at a time drives the base. The emergency stop ends both and
 refuses new ones until it is released; nothing resumes by itself after it. Odometry older than
 `input_timeout` stops whatever runs (the base driver is gone: no closed loop without it); a
-scan older than that counts as no scan (primitives stop: they cannot see).
+scan older than that counts as no scan (primitives stop, a goal waits: they cannot see).
 
 Every end of a goal or a primitive is told through `on_event(level, code, text)`.
 """
@@ -497,7 +497,8 @@ class Pilot:
         scan_pose: Pose | None = None
         if scan is not None and self._scan_odom is not None:
             placed, scan_pose = scan, self._pose_at(self._scan_odom)
-        cmd = self.navigator.step(now, self.pose(), placed, odom, localised=self.localised, scan_pose=scan_pose)
+        cmd = self.navigator.step(now, self.pose(), placed, odom, localised=self.localised, scan_pose=scan_pose,
+                                  seeing=scan is not None)
         self._tell_goal_end()
         return cmd
 

@@ -61,13 +61,15 @@ class Camera:
     def optical_rotation(self, data: mujoco.MjData) -> np.ndarray:
         return data.cam_xmat[self.id].reshape(3, 3) @ _MJ_TO_OPTICAL
 
-    def info(self, data: mujoco.MjData) -> m.CameraInfo:
+    def info(self, data: mujoco.MjData, stamp: int | None = None) -> m.CameraInfo:
+        """The camera as it was in `data`; `stamp` (ns) is when `data` was copied (default: now)."""
         rb = data.xmat[self.robot_body].reshape(3, 3)
         pos = rb.T @ (data.cam_xpos[self.id] - data.xpos[self.robot_body])
         rot = rb.T @ self.optical_rotation(data)
         i = self.intr
         return m.CameraInfo(width=i.width, height=i.height, fx=i.fx, fy=i.fy, cx=i.cx, cy=i.cy,
-                            pose=pos.tolist() + quaternion_wxyz(rot), frame=f"{self.name}_optical")
+                            pose=pos.tolist() + quaternion_wxyz(rot), frame=f"{self.name}_optical",
+                            stamp=m.now_ns() if stamp is None else stamp)
 
     # ------------------------------------------------------------------ images
     def depth_ray(self, data: mujoco.MjData) -> np.ndarray:
@@ -111,14 +113,16 @@ class Camera:
         depth[depth > MAX_DEPTH_M] = 0.0
         return depth
 
-    def rgb_jpeg(self, data: mujoco.MjData) -> m.RgbImage:
+    def rgb_jpeg(self, data: mujoco.MjData, stamp: int | None = None) -> m.RgbImage:
+        """The colour image of `data`, stamped `stamp` (ns: when `data` was copied; default: now)."""
         r = self._renderer("rgb")
         self._update(r, data)
         rgb = r.render()
         ok, buf = cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
         if not ok:
             raise RuntimeError("OpenCV could not encode the camera image as JPEG")
-        return m.RgbImage(jpeg=buf.tobytes(), width=self.intr.width, height=self.intr.height)
+        return m.RgbImage(jpeg=buf.tobytes(), width=self.intr.width, height=self.intr.height,
+                          stamp=m.now_ns() if stamp is None else stamp)
 
     def close(self) -> None:
         for r in self._renderers.values():

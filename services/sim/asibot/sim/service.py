@@ -242,15 +242,19 @@ class SimService(Service):
             ticker: Ticker | None = None   # made after the first frame, when the cameras are warm
             while first or (ticker is not None and ticker.wait()):
                 sim.copy_positions(data)
+                # Every image of this frame shows the world as copied now, however long the
+                # renders take (30-80 ms each on a loaded machine, one after the other): nav
+                # places a scan where the robot was at its stamp.
+                stamp = m.now_ns()
                 mujoco.mj_kinematics(sim.model, data)
                 mujoco.mj_camlight(sim.model, data)
                 for c in cams:
                     p = pubs[c.name]
-                    p["info"].put(c.info(data))
+                    p["info"].put(c.info(data, stamp))
                     if "depth" in CAMERA_KINDS[c.name]:
-                        p["depth"].put(m.DepthImage(depth=c.depth(data, opt.depth_method)))
+                        p["depth"].put(m.DepthImage(depth=c.depth(data, opt.depth_method), stamp=stamp))
                     if "rgb" in CAMERA_KINDS[c.name]:
-                        p["rgb"].put(c.rgb_jpeg(data))
+                        p["rgb"].put(c.rgb_jpeg(data, stamp))
                 self._frames += 1
                 if first:
                     first = False
