@@ -24,6 +24,13 @@ def test_a_pixel_and_its_depth_give_back_the_point_it_came_from():
         depth.project(info, [0, 0, -1])
 
 
+def test_intrinsics_and_their_camera_info_carry_the_same_numbers():
+    info = kitchen_info()
+    lens = depth.Intrinsics.of(info)
+    again = lens.info(info.pose, info.frame, info.stamp)
+    assert again == info and depth.Intrinsics.of(again) == lens
+
+
 def test_a_pose_and_its_matrix_are_the_same_transform():
     pose = kitchen_info().pose
     t = depth.pose_matrix(pose)

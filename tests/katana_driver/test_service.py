@@ -105,6 +105,8 @@ def test_a_silent_controller_is_a_fault_with_a_sentence_and_reset_brings_it_back
     fault = k.states.last().fault
     assert fault.startswith("The Katana's controller stopped answering (the Katana did not answer command ")
     assert fault.endswith("check its power and the serial cable, then call reset_fault.")
+    # the event comes on its own key: it may arrive a moment after the state
+    wait_until(lambda: k.texts("silent"), 5, message=lambda: f"no event said so; events: {k.codes()}")
     assert k.texts("silent") == [fault]
     with pytest.raises(RpcError) as refused:
         k.user.call(keys.driver_rpc(R, "reset_fault"), timeout=5)

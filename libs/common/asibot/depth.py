@@ -62,6 +62,13 @@ class Intrinsics:
         """The intrinsics a CameraInfo carries."""
         return cls(info.width, info.height, info.fx, info.fy, info.cx, info.cy)
 
+    def info(self, pose: Sequence[float], frame: str, stamp: int) -> CameraInfo:
+        """The CameraInfo of a camera with these intrinsics, mounted at `pose` (x, y, z, qw, qx,
+        qy, qz in the robot's base frame) with optical frame `frame`, for a frame taken at
+        `stamp` (ns)."""
+        return CameraInfo(width=self.width, height=self.height, fx=self.fx, fy=self.fy, cx=self.cx, cy=self.cy,
+                          pose=list(pose), frame=frame, stamp=stamp)
+
     @classmethod
     def from_fovy(cls, width: int, height: int, fovy_deg: float) -> "Intrinsics":
         if width < 2 or height < 2:

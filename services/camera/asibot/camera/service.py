@@ -45,9 +45,7 @@ def jpeg(rgb: np.ndarray) -> bytes:
 
 def messages_of(frame: Frame, pose: list[float], name: str) -> tuple[m.CameraInfo, m.DepthImage, m.RgbImage | None]:
     """The sim's three messages for one frame."""
-    i = frame.intrinsics
-    info = m.CameraInfo(width=i.width, height=i.height, fx=i.fx, fy=i.fy, cx=i.cx, cy=i.cy, pose=list(pose),
-                        frame=f"{name}_optical", stamp=frame.stamp)
+    info = frame.intrinsics.info(pose, f"{name}_optical", frame.stamp)
     depth = m.DepthImage(depth=frame.depth, stamp=frame.stamp)
     rgb = None
     if frame.rgb is not None:

@@ -66,10 +66,8 @@ class Camera:
         rb = data.xmat[self.robot_body].reshape(3, 3)
         pos = rb.T @ (data.cam_xpos[self.id] - data.xpos[self.robot_body])
         rot = rb.T @ self.optical_rotation(data)
-        i = self.intr
-        return m.CameraInfo(width=i.width, height=i.height, fx=i.fx, fy=i.fy, cx=i.cx, cy=i.cy,
-                            pose=pos.tolist() + quaternion_wxyz(rot), frame=f"{self.name}_optical",
-                            stamp=m.now_ns() if stamp is None else stamp)
+        return self.intr.info(pos.tolist() + quaternion_wxyz(rot), f"{self.name}_optical",
+                              m.now_ns() if stamp is None else stamp)
 
     # ------------------------------------------------------------------ images
     def depth_ray(self, data: mujoco.MjData) -> np.ndarray:

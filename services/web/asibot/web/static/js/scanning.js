@@ -190,6 +190,8 @@ function chipPlace(b, inside) {
     if (inside.some((i) => i === n || i.contains(n) || n.contains(i)) || n.closest('#scan-ring')) continue;
     const news = n.matches(MATTERS);
     if (news && !n.textContent.trim()) continue;      // an empty status line hides nothing
+    // nor does what is not shown: Release all keeps its room under the stop, invisible
+    if (!n.checkVisibility({ visibilityProperty: true })) continue;
     const r = n.getBoundingClientRect();
     if (r.width && r.height && r.bottom > 0 && r.top < vh) others.push({ r, weight: news ? 10 : 1 });
   }

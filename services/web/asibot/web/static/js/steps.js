@@ -121,7 +121,7 @@ export function stepsEditor({ onSaved, showPython }) {
     draw();
     await onSaved(name);
     return r;
-  }, `Steps saved: ${name}.py is made from them.`);
+  });   // no notice: the status line (role=status) says "Steps saved" and is read out
 
   async function togglePython() {
     if (!code.hidden) {
