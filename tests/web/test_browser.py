@@ -389,3 +389,54 @@ def test_the_api_page_draws_the_api_with_no_internet(page, kitchen):
     page.locator(".opblock-summary-path", has_text="/api/robots/{robot}/step").first.wait_for(timeout=10000)
     screenshot(page, "api-docs")
     assert not errors, errors
+
+
+#: How many pixels of the 3D view's picture are the arm's blue (the background is a light grey).
+ARM_PIXELS = """() => {
+  const canvas = document.querySelector('#view .viewer canvas');
+  if (!canvas || !canvas.width) return 0;
+  const copy = document.createElement('canvas');
+  copy.width = canvas.width; copy.height = canvas.height;
+  const ctx = copy.getContext('2d');
+  ctx.drawImage(canvas, 0, 0);
+  const px = ctx.getImageData(0, 0, copy.width, copy.height).data;
+  let n = 0;
+  for (let i = 0; i < px.length; i += 4) if (px[i + 2] > px[i] + 40) n += 1;
+  return n;
+}"""
+
+
+def test_a_tab_loads_its_module_when_first_shown_and_home_loads_no_3d_or_editor(browser, kitchen):
+    """Home parses neither three.js nor CodeMirror (1.3 MB); the Joint tab brings the 3D view with
+    the arm drawn, the Program tab the editor; a tab chosen while another loads wins."""
+    context = browser.new_context(viewport={"width": 1366, "height": 900})
+    page = context.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    asked: list[str] = []
+    page.on("request", lambda r: asked.append(r.url.split("/static/", 1)[-1]))
+    try:
+        page.goto(kitchen.web_url)
+        page.wait_for_selector("body[data-ready=true]", timeout=15000)
+        page.wait_for_selector("text=Teach the robot a task", timeout=15000)
+        assert not [u for u in asked if u.startswith("vendor/")], asked
+        page.evaluate("location.hash = 'joint'")
+        page.wait_for_selector(".viewer canvas", timeout=15000)
+        assert "vendor/three.js" in asked and "vendor/codemirror.js" not in asked, asked
+        wait_until(lambda: page.evaluate(ARM_PIXELS) > 500, timeout=15,
+                   message=lambda: f"the 3D view drew {page.evaluate(ARM_PIXELS)} pixels of the arm")
+        page.evaluate("location.hash = 'program'")
+        page.wait_for_selector(".cm-content", timeout=15000)
+        assert "vendor/codemirror.js" in asked
+        # Launcher, not loaded yet, then Home (loaded) at once: Home shows and stays once the
+        # Launcher's module has come.
+        page.evaluate("location.hash = 'launcher'; setTimeout(() => { location.hash = 'home'; }, 0)")
+        page.wait_for_selector("text=Teach the robot a task", timeout=15000)
+        page.evaluate("import('/static/js/views/launcher.js').then(() => new Promise(requestAnimationFrame))")
+        assert "js/views/launcher.js" in asked
+        assert page.evaluate("document.getElementById('view').getAttribute('aria-labelledby')") == "tab-home"
+        assert page.locator("text=Teach the robot a task").count() == 1
+        assert page.locator("#tab-home[aria-selected=true]").count() == 1
+    finally:
+        context.close()
+    assert not errors, errors

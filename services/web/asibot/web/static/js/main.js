@@ -6,37 +6,60 @@ import { startDwell } from './dwell.js';
 import { startEmergencyStop } from './estop.js';
 import { startScanning } from './scanning.js';
 import { about, el, notify } from './ui.js';
-import { viewer } from './viewer3d.js';
 import { render as renderWizard } from './wizard.js';
-import home from './views/home.js';
-import joint from './views/joint.js';
-import cartesian from './views/cartesian.js';
-import pointer from './views/pointer.js';
-import program from './views/program.js';
-import speech from './views/speech.js';
-import assigner from './views/assigner.js';
-import launcher from './views/launcher.js';
-import video from './views/video.js';
-import pioneer from './views/pioneer.js';
-import base from './views/base.js';
-import access from './views/access.js';
 
-const VIEWS = [home, joint, cartesian, pointer, program, speech, assigner, launcher, video, pioneer, base, access];
+// The pages, in the tabs' order. A page's module is loaded when it is first shown, so a page that
+// never shows the 3D view or the program editor never parses three.js or CodeMirror (1.3 MB).
+const VIEWS = [
+  { id: 'home', title: 'Home', load: () => import('./views/home.js') },
+  { id: 'joint', title: 'Joint', load: () => import('./views/joint.js') },
+  { id: 'cartesian', title: 'Cartesian', load: () => import('./views/cartesian.js') },
+  { id: 'pointer', title: 'Pointer', load: () => import('./views/pointer.js') },
+  { id: 'program', title: 'Program', load: () => import('./views/program.js') },
+  { id: 'speech', title: 'Speech', load: () => import('./views/speech.js') },
+  { id: 'assigner', title: 'Assigner', load: () => import('./views/assigner.js') },
+  { id: 'launcher', title: 'Launcher', load: () => import('./views/launcher.js') },
+  { id: 'video', title: 'Video', load: () => import('./views/video.js') },
+  { id: 'pioneer', title: 'Pioneer arm', load: () => import('./views/pioneer.js') },
+  { id: 'base', title: 'Base', load: () => import('./views/base.js') },
+  { id: 'access', title: 'Access', load: () => import('./views/access.js') },
+];
 let active = null;   // { view, handle }
 
-function show(id) {
-  const view = VIEWS.find((v) => v.id === id) || home;
-  if (active && active.view === view) return;
-  if (active && active.handle.unmount) active.handle.unmount();
+let wanted = null;    // the view last asked for: a slow load that another choice overtook is not shown
+
+// The chosen tab's view replaces the shown one at once (a "Loading" line while its module comes
+// the first time), so nothing of the old view stays on screen under the new tab.
+async function show(id) {
+  const view = VIEWS.find((v) => v.id === id) || VIEWS[0];
+  if (wanted === view) return;
+  wanted = view;
   for (const tab of document.querySelectorAll('#tabs button')) {
     const on = tab.dataset.view === view.id;
     tab.setAttribute('aria-selected', String(on));
     tab.tabIndex = on ? 0 : -1;
     if (on) tab.scrollIntoView({ block: 'nearest', inline: 'nearest' });   // a phone's scrolled tab row
   }
+  if (active && active.handle.unmount) active.handle.unmount();
+  active = null;
   const root = document.getElementById('view');
   root.setAttribute('aria-labelledby', `tab-${view.id}`);
-  active = { view, handle: view.mount(root) || {} };
+  root.setAttribute('aria-busy', 'true');
+  root.replaceChildren(el('p', { class: 'muted' }, `Loading the ${view.title} page…`));
+  let module;
+  try {
+    ({ default: module } = await view.load());
+  } catch (e) {
+    if (wanted !== view) return;
+    wanted = null;   // choosing the tab again tries again
+    root.replaceChildren(el('p', { role: 'alert' }, `The ${view.title} page could not load (${e.message}). Check the connection, then choose its tab again.`));
+    root.removeAttribute('aria-busy');
+    return;
+  }
+  if (wanted !== view) return;
+  root.replaceChildren();
+  root.removeAttribute('aria-busy');
+  active = { view, handle: module.mount(root) || {} };
   if (active.handle.update) active.handle.update(chosenRobot());
   renderWizard();
 }
@@ -72,18 +95,15 @@ async function start() {
   startDwell();
   startEmergencyStop();
   window.addEventListener('hashchange', () => show(location.hash.slice(1)));
-  let shownRobot;
   onChange((what) => {
     if (what === 'feed') feedState();
     const robot = chosenRobot();
-    if (robot && robot.id !== shownRobot) { shownRobot = robot.id; viewer().show(robot.id).catch((e) => notify(e.message)); }
-    if (robot && robot.joints) viewer().setJoints(robot.joints.names, robot.joints.deg);
     if (active && active.handle.update) active.handle.update(robot);
   });
   // A streamed motion (a held jog button, the pointer) that the server refused: say why.
   onMessage((msg) => { if (msg.type === 'refused') notify(about(msg.robot, msg.text)); });
   connectFeed();
-  show(location.hash.slice(1) || 'home');
+  await show(location.hash.slice(1) || 'home');
   document.body.dataset.ready = 'true';
 }
 

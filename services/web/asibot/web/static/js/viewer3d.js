@@ -6,8 +6,8 @@
 // robot's frame (the server's cloud: services/web/asibot/web/world.py), refreshed a few times a
 // second while the view is on screen; the picture's data-points says how many are drawn.
 import * as THREE from '/static/vendor/three.js';
-import { api, paths } from './api.js';
-import { el } from './ui.js';
+import { api, chosenRobot, onChange, paths } from './api.js';
+import { el, notify } from './ui.js';
 
 const SOLID = new THREE.MeshStandardMaterial({ color: 0x4f7fb0, metalness: 0.2, roughness: 0.55 });
 // How often the camera points are fetched while shown, ms; the camera list is asked again this often.
@@ -113,6 +113,8 @@ export class RobotViewer {
     this.robot = make(SOLID);
     this.ghost = make(GHOST);
     this.ghost.visible = false;
+    // The joints that came while the model loaded: a still arm sends no new ones.
+    if (this.latest && robotId === this.robotId) this.setJoints(...this.latest);
     this.dirty = true;
   }
 
@@ -226,8 +228,21 @@ export class RobotViewer {
 }
 
 // One viewer for the whole page: views hand its element around instead of making new WebGL contexts.
+// Made when a page first shows it (a page that never does makes no WebGL context and loads no
+// model); from then on it follows the commanded robot and its joints.
 let shared = null;
 export function viewer() {
-  if (!shared) shared = new RobotViewer();
+  if (!shared) {
+    const made = new RobotViewer();
+    const follow = () => {
+      const robot = chosenRobot();
+      if (!robot) return;
+      made.show(robot.id).catch((e) => notify(e.message));
+      if (robot.joints) made.setJoints(robot.joints.names, robot.joints.deg);
+    };
+    shared = made;
+    onChange(follow);
+    follow();
+  }
   return shared;
 }

@@ -130,8 +130,6 @@ function download() {
 }
 
 export default {
-  id: 'access',
-  title: 'Access',
   mount(root) {
     const how = el('p', { class: 'big', role: 'status' });
     const parts = [choice('enabled'), choice('scope'), choice('mode'), choice('pattern'), choice('switches'), switchRow('next'), switchRow('select'),

@@ -5,8 +5,6 @@ import { kept, recall, remember, setKept } from '../keep.js';
 import { attempt, el, notify } from '../ui.js';
 
 export default {
-  id: 'assigner',
-  title: 'Assigner',
   mount(root) {
     const name = kept('assigner.name', el('input', { type: 'text', 'aria-label': 'Task name', placeholder: 'Give me the red can' }));
     const program = kept('assigner.program', el('select', { 'aria-label': 'Program' }));

@@ -96,8 +96,6 @@ function drivePanel(robotId) {
 }
 
 export default {
-  id: 'base',
-  title: 'Base',
   mount(root) {
     let built = null;
     const waiting = () => root.replaceChildren(el('section', { class: 'panel' }, el('h2', {}, 'Base'),

@@ -187,8 +187,6 @@ export function cameraPanel(onEnlarge) {
 }
 
 export default {
-  id: 'cartesian',
-  title: 'Cartesian',
   mount(root) {
     const controls = cartesianControls();
     const points = pointsPanel();

@@ -33,8 +33,6 @@ function switchAccess() {
 }
 
 export default {
-  id: 'home',
-  title: 'Home',
   mount(root) {
     const status = el('p', { class: 'big', role: 'status' });
     const mine = favouritesPanel();

@@ -44,8 +44,6 @@ export function jointControls(robot) {
 }
 
 export default {
-  id: 'joint',
-  title: 'Joint',
   mount(root) {
     let controls = null;
     let shownFor = null;

@@ -5,8 +5,6 @@ import { attemptOn, el, notify } from '../ui.js';
 import { outputPanel, stopProgramButton } from './program.js';
 
 export default {
-  id: 'launcher',
-  title: 'Launcher',
   mount(root) {
     const grid = el('div', { class: 'launcher', role: 'group', 'aria-label': 'Tasks' });
     const output = outputPanel();

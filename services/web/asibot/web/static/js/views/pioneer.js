@@ -13,8 +13,6 @@ function katana() {
 }
 
 export default {
-  id: 'pioneer',
-  title: 'Pioneer arm',
   mount(root) {
     let built = null;   // the controls, while the page commands a Pioneer with an arm
     let shown = null;   // what the tab shows now: '' (waiting), 'offer:<id>:<commanded>' or 'controls:<id>'

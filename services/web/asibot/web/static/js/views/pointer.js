@@ -32,8 +32,6 @@ function firstPad() {
 }
 
 export default {
-  id: 'pointer',
-  title: 'Pointer',
   mount(root) {
     const cfg = state.config.pointer;
     const input = { forward: false, backward: false, deadman: false };   // the page's buttons (and the pad's dead-man)

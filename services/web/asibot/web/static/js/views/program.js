@@ -121,8 +121,6 @@ export function stopProgramButton() {
 }
 
 export default {
-  id: 'program',
-  title: 'Program',
   mount(root) {
     const list = el('div', { class: 'chips', role: 'group', 'aria-label': 'Programs' });
     const newName = kept('program.new', el('input', { type: 'text', 'aria-label': 'New program name', placeholder: 'give_me_the_can' }));

@@ -97,8 +97,6 @@ function micPanel() {
 }
 
 export default {
-  id: 'speech',
-  title: 'Speech',
   mount(root) {
     const list = el('ul', { class: 'points', 'aria-label': 'Words and phrases' });
     const word = kept('speech.word', el('input', { type: 'text', 'aria-label': 'Word or phrase', placeholder: 'give me the red can', maxlength: '80' }));

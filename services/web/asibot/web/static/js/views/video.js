@@ -3,8 +3,6 @@ import { api, paths } from '../api.js';
 import { el, notify } from '../ui.js';
 
 export default {
-  id: 'video',
-  title: 'Video',
   mount(root) {
     const grid = el('div', { class: 'video' });
     const heading = el('h2', {}, 'Cameras');
