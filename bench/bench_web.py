@@ -11,7 +11,9 @@ Rows (each beside a reference measured in the same run):
   p50/p99, beside a Python program's `pointer` call to the first arm command;
 - one-switch scanning (the Launcher, Space as the switch): a tap to the ring moved onto the
   next element, p50/p99, beside the browser's frame time;
-- page weight and load time, beside the npm packages' share.
+- page weight and load time, beside the npm packages' share;
+- a fresh page (a new browser context) usable on Home, Joint and Program, beside a blank page
+  in a new context.
 
 Times in the browser and in this process are both the machine's wall clock (the browser's
 `performance.timeOrigin + performance.now()`), so one-way delays need no round trip.
@@ -98,6 +100,7 @@ def main() -> None:
             page.remove_listener("response", weigh)
             rows.append(("page weight", "KiB", total / 1024, "of which npm packages", vendor / 1024, ""))
             rows.append(("page load to usable (cached server, fresh browser)", "s", t_load, "", "", ""))
+            rows += fresh_page_rows(browser, stack.web_url, 1 if quick else 10)
 
             # --- arm state to the page ---------------------------------------------------------
             page.evaluate("""() => {
@@ -178,6 +181,36 @@ def main() -> None:
     print_table(rows, ("what", "unit", "value", "reference", "reference value", "budget"))
     print(f"\n(samples: {len(to_page)} arm states, {len(jog)} jog presses; median of the page lag "
           f"{statistics.median(to_page) if to_page else float('nan'):.1f} ms)")
+
+
+#: What each timed tab shows once it is usable: Home's first button, the 3D view (three.js, the
+#: robot's model), the editor (CodeMirror). A tab's code is loaded when it is first shown.
+SHOWN = {"home": "text=Teach the robot a task", "joint": ".viewer canvas", "program": ".cm-content"}
+
+
+def fresh_page_rows(browser, url: str, n: int) -> list[tuple]:
+    """A page of its own (a new browser context: nothing cached in the browser) opened on a tab
+    until usable (its feed live, the arm listed, the tab shown), p50 of n, beside a blank page in
+    a new context: what the browser costs before our page does anything."""
+    def opened(target: str, ready: list[str]) -> float:
+        start = time.monotonic()
+        context = browser.new_context(viewport={"width": 1366, "height": 900})
+        try:
+            page = context.new_page()
+            page.goto(target)
+            for selector in ready:
+                page.wait_for_selector(selector, timeout=30000)
+            return time.monotonic() - start
+        finally:
+            context.close()
+    blank = [opened("about:blank", []) for _ in range(n)]
+    rows = []
+    for tab, shown in SHOWN.items():
+        times = [opened(f"{url}#{tab}", ["body[data-ready=true]", ".robot-card[data-robot=asibot-sim]", shown])
+                 for _ in range(n)]
+        rows.append((f"a fresh page usable on {tab.capitalize()} p50", "s", pct(times, 50),
+                     "a blank page, fresh context p50", pct(blank, 50), ""))
+    return rows
 
 
 def pointer_rows(page, bus, client: CartesianClient, n: int) -> list[tuple]:

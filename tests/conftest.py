@@ -5,10 +5,12 @@ cores of a 2-core machine kept busy, as a loaded CI machine would be.
 With `-n 2` (pytest-xdist: the day-to-day loop, `pytest -m "not slow" -n 2`) every test of a
 module with a real-time test (marked `slow`: a simulated robot moving, a browser) runs on one
 worker, one after the other, the image test on its own, and the unit tests spread over both.
-The whole suite runs in one process (CI): a real-time test beside the image's build, or beside
-other tests, lost its odometry for half a second (two cores, vfs copies), which no robot
-would."""
+`tests/run` (CI) runs the tests not marked `slow` so, then the `slow` ones in one process: a
+real-time test beside the image's build, or beside other tests, lost its odometry for half a
+second (two cores, vfs copies), which no robot would; two browser stacks at once took longer
+than one after the other (both cores were already busy)."""
 
+import collections
 import fcntl
 import os
 import signal
@@ -95,6 +97,25 @@ def quiet(_share_the_cores):
         yield
     finally:
         fcntl.flock(_share_the_cores, fcntl.LOCK_SH)
+
+
+_file_seconds: collections.Counter[str] = collections.Counter()
+
+
+def pytest_runtest_logreport(report):
+    """Every phase's time, by test file (under xdist, the workers' reports come here too)."""
+    _file_seconds[report.nodeid.split("::", 1)[0]] += report.duration
+
+
+def pytest_terminal_summary(terminalreporter):
+    """Where the run's time went, by file: the module fixtures (a stack, a browser) are in their
+    first test's setup, which --durations shows apart from the tests."""
+    if not _file_seconds:
+        return
+    total = sum(_file_seconds.values())
+    terminalreporter.write_sep("=", f"slowest files: {total:.0f} s of tests in all")
+    for path, seconds in _file_seconds.most_common(20):
+        terminalreporter.write_line(f"{seconds:8.1f}s {100 * seconds / total:5.1f} %  {path}")
 
 
 def pytest_addoption(parser):

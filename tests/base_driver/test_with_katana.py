@@ -69,10 +69,11 @@ def test_the_estop_stops_both_parts_and_reset_fault_waits_for_its_release(pionee
 
 def test_the_emulated_katanas_faults_are_injected_through_the_robots_one_driver(pioneer):
     svc, user, arm_states = pioneer
-    base_fault = svc.driver.status()["fault"]
     user.call(keys.driver_rpc(ROBOT, "inject_fault"), {"fault": "collision", "joint": arm_states.last().names[1]})
     wait_until(lambda: arm_states.last().fault != "", 5)
     assert "reports a collision" in arm_states.last().fault
-    assert svc.driver.status()["fault"] == base_fault                 # the base is not faulted by it
+    # The base is not faulted by it. (Its own fault may still change meanwhile: on a loaded
+    # machine its motors were still being enabled as the test began.)
+    assert "collision" not in svc.driver.status()["fault"]
     user.call(keys.driver_rpc(ROBOT, "reset_fault"))
     wait_until(lambda: arm_states.last().fault == "", 5)

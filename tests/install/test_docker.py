@@ -85,7 +85,9 @@ def engine(tmp_path_factory: pytest.TempPathFactory):
     hold = open(CACHE.with_suffix(".lock"), "w")
     fcntl.flock(hold, fcntl.LOCK_EX)            # one engine on the cache at a time
     driver = storage_driver()
-    root = CACHE / driver                       # a data root keeps the driver it was made with
+    # A data root keeps the driver it was made with. Not CACHE/vfs: an older version of this
+    # test used CACHE itself as vfs's data root, whose layers are in CACHE/vfs.
+    root = CACHE / f"root-{driver}"
     if cache_size(CACHE) > CACHE_LIMIT:
         shutil.rmtree(CACHE)
     root.mkdir(parents=True, exist_ok=True)

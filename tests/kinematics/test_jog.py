@@ -58,12 +58,15 @@ def test_joint_steps_touched_while_moving_add_up_from_the_previous_target(client
 
 
 def test_cartesian_steps_touched_while_moving_add_up_in_a_straight_line(client):
-    p0 = bent(client)
-    jog(client, "z", -0.05, 1)              # 1 cm/s: the first step is on its way for 5 s
+    bent(client)
+    first = jog(client, "z", -0.05, 1)      # 1 cm/s: the first step is on its way for 5 s
     here = client.stat()[2]
     second = jog(client, "z", -0.05, 1)
-    assert here > p0[2] - 0.045
-    assert second["point"] == pytest.approx([p0[0], p0[1], p0[2] - 0.1, p0[3], p0[4]], abs=1e-6)
+    # Compared with the first step's target, not with a point measured before it: the arm's
+    # last state can lag its stop by a hair on a loaded machine (0.1 mm, 0.01 deg seen).
+    p1 = first["point"]
+    assert here > p1[2] + 0.005, "the first step was still on its way"
+    assert second["point"] == pytest.approx([p1[0], p1[1], p1[2] - 0.05, p1[3], p1[4]], abs=1e-6)
     assert client.wait(timeout=40)
     assert client.stat()[:3] == pytest.approx(second["point"][:3], abs=3e-3)
 

@@ -406,6 +406,29 @@ ARM_PIXELS = """() => {
 }"""
 
 
+def test_a_page_whose_module_cannot_load_says_so_and_loads_when_its_tab_is_chosen_again(page):
+    """The Launcher's module does not come (a dropped connection): the view says so in one
+    sentence, and the tab chosen again (the same tab: no hashchange) loads it."""
+    dropped: list[str] = []
+
+    def drop(route):
+        dropped.append(route.request.url)
+        route.abort("connectionreset")
+    page.route("**/static/js/views/launcher.js*", drop)
+    page.locator("#tab-launcher").click()
+    alert = page.locator("#view [role=alert]")
+    alert.wait_for(timeout=15000)
+    assert "The Launcher page could not load" in alert.inner_text()
+    assert "choose its tab again" in alert.inner_text()
+    assert page.locator("#view[aria-busy]").count() == 0, "the view is no longer busy loading"
+    assert page.locator("#tab-launcher[aria-selected=true]").count() == 1
+    page.unroute("**/static/js/views/launcher.js*")
+    page.locator("#tab-launcher").click()
+    page.locator("#view").get_by_role("heading", name="Launch a task").wait_for(timeout=15000)
+    assert page.locator("#view [role=alert]").count() == 0
+    assert len(dropped) == 1
+
+
 def test_a_tab_loads_its_module_when_first_shown_and_home_loads_no_3d_or_editor(browser, kitchen):
     """Home parses neither three.js nor CodeMirror (1.3 MB); the Joint tab brings the 3D view with
     the arm drawn, the Program tab the editor; a tab chosen while another loads wins."""

@@ -46,12 +46,14 @@ def show(web, camera, scene: Scene | np.ndarray, info: m.CameraInfo | None = Non
     rgb[:] = RED
     ok, jpeg = cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
     sent = m.DepthImage(depth=image)
-    camera[0].put(sent)
-    camera[1].put(m.RgbImage(jpeg=jpeg.tobytes(), width=info.width, height=info.height))
-    camera[2].put(info)
     world = svc.web.world
 
     def kept() -> bool:
+        # Sent again until kept, as a camera sends frame after frame: the server subscribes to
+        # pictures only once a page asks for them (web/ondemand.py), and a frame before that is lost.
+        camera[0].put(sent)
+        camera[1].put(m.RgbImage(jpeg=jpeg.tobytes(), width=info.width, height=info.height))
+        camera[2].put(info)
         try:
             return (np.array_equal(world._depth(ROBOT, CAMERA)[1], image) and world._info(ROBOT, CAMERA) == info
                     and svc.web.cameras.newest(ROBOT, CAMERA) is not None)

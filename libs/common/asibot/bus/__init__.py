@@ -7,8 +7,9 @@ $ASIBOT_ROUTER) is a Zenoh router (`zenoh_backend`, the only module that imports
 """
 
 from asibot.bus.base import MEMORY_SCHEME, RPC_WORKERS, Bus, Closable, Publisher
+from asibot.bus.ondemand import OnDemand
 from asibot.bus.zenoh_backend import (DEFAULT_ROUTER, ROUTER_ENV, open_router, router_endpoint,
                                       run_router)
 
-__all__ = ["Bus", "Publisher", "Closable", "MEMORY_SCHEME", "RPC_WORKERS", "DEFAULT_ROUTER",
+__all__ = ["Bus", "Publisher", "Closable", "OnDemand", "MEMORY_SCHEME", "RPC_WORKERS", "DEFAULT_ROUTER",
            "ROUTER_ENV", "open_router", "router_endpoint", "run_router"]

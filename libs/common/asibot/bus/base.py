@@ -77,10 +77,14 @@ class Publisher(Generic[M]):
         """Publish already-encoded bytes (replay)."""
         self._raw.put(payload)
 
+    def matching(self) -> bool:
+        """Whether a subscriber matches this key now: a producer may skip work nobody receives."""
+        return self._raw.matching()
+
     def wait_for_subscribers(self, timeout: float = 5.0) -> bool:
         """Wait until at least one subscriber matches this key; True if one does in time."""
         deadline = time.monotonic() + timeout
-        while not self._raw.matching():
+        while not self.matching():
             if time.monotonic() > deadline:
                 return False
             time.sleep(0.005)
@@ -375,6 +379,13 @@ class Bus:
         return sorted(set(self._tokens(pattern, timeout)))
 
     # ------------------------------------------------------------ lifetime
+    def undeclare(self, obj: Closable) -> None:
+        """Close one subscription, publisher or token of this bus now, and forget it: for a
+        service that subscribes and unsubscribes as it runs (the web's camera pictures)."""
+        with self._lock:
+            self._closables = [c for c in self._closables if c is not obj]
+        obj.close()
+
     def close(self) -> None:
         if self._closed:
             return

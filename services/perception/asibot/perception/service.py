@@ -36,7 +36,7 @@ import numpy as np
 
 from asibot import keys, runtime, verbs
 from asibot import messages as m
-from asibot.bus import Bus
+from asibot.bus import Bus, OnDemand
 from asibot.errors import RpcError
 from asibot.runtime import Service
 from asibot.verbs import Field, Text, Verb
@@ -119,9 +119,12 @@ class PerceptionService(Service):
         for name in options.depth_cameras:
             bus.subscribe(keys.camera_depth(robot, name), m.DepthImage,
                           lambda msg, name=name: self._on_depth(name, msg), maxsize=1)
+        # The finder's pictures only while it is asked to find (the sim renders none nobody receives).
+        self._pictures: OnDemand | None = None
         if options.rgb_camera:
-            bus.subscribe(keys.camera_rgb(robot, options.rgb_camera), m.RgbImage, self._on_rgb,
-                          maxsize=1)
+            rgb_key = keys.camera_rgb(robot, options.rgb_camera)
+            self._pictures = OnDemand(bus, lambda: bus.subscribe(rgb_key, m.RgbImage, self._on_rgb, maxsize=1),
+                                      name="perception-pictures")
         if options.sonar is not None:
             bus.subscribe(keys.base_sonar(robot), m.Sonar, self._on_sonar)
         bus.subscribe(keys.base_odom(robot), m.Odometry, self._on_odom)
@@ -233,8 +236,9 @@ class PerceptionService(Service):
         except BadInput as exc:
             raise RpcError("bad_request", _sentence(exc)) from None
         name = self.opt.rgb_camera
-        if not name:
+        if not name or self._pictures is None:
             raise RpcError("unavailable", "This perception service runs without an RGB camera (--rgb-camera).")
+        self._pictures.want(lambda: self._rgb is not None and self.clock() - self._rgb[1] <= RGB_STALE_S)
         rgb, cam, now = self._rgb, self._cams[name], self.clock()
         if rgb is None:
             raise RpcError("unavailable", f"No image from the {name} camera yet: is the sim or the camera "
@@ -268,6 +272,8 @@ class PerceptionService(Service):
 
     def close(self) -> None:
         self._stop.set()
+        if self._pictures is not None:
+            self._pictures.close()
         self._watcher.join(timeout=1.0)
 
 

@@ -251,9 +251,12 @@ class SimService(Service):
                 for c in cams:
                     p = pubs[c.name]
                     p["info"].put(c.info(data, stamp))
-                    if "depth" in CAMERA_KINDS[c.name]:
+                    # A picture nobody subscribes to is not rendered (most of the sim's CPU when
+                    # it is: 60 % of a core against 23 % in the kitchen), as a Gazebo camera
+                    # sensor is inactive without subscribers. The first frame warms the GL contexts.
+                    if "depth" in CAMERA_KINDS[c.name] and (first or p["depth"].matching()):
                         p["depth"].put(m.DepthImage(depth=c.depth(data, opt.depth_method), stamp=stamp))
-                    if "rgb" in CAMERA_KINDS[c.name]:
+                    if "rgb" in CAMERA_KINDS[c.name] and (first or p["rgb"].matching()):
                         p["rgb"].put(c.rgb_jpeg(data, stamp))
                 self._frames += 1
                 if first:

@@ -1,8 +1,9 @@
 """Camera images for the Video tab, as MJPEG streams an <img> can show with no script.
 
 The cameras publish JPEG frames on the bus already; the server keeps the newest frame of each
-(undecoded, so an unwatched camera costs one copy per frame) and forwards frames to the pages
-that watch. Which cameras exist is learnt from their frames: a camera is listed while it sends.
+(undecoded) and forwards frames to the pages that watch. It subscribes only while a page asks
+for pictures (asibot.bus.OnDemand: the sim renders none that nobody receives). Which cameras exist
+is learnt from their frames: a camera is listed while it sends.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from typing import Iterator
 
 from asibot import keys, messages
 from asibot.errors import MessageError
-from asibot.bus import Bus
+from asibot.bus import Bus, OnDemand
 from asibot.messages import RgbImage
 
 BOUNDARY = "frame"
@@ -27,7 +28,9 @@ class Cameras:
     def __init__(self, bus: Bus) -> None:
         self._cond = threading.Condition()
         self._frames: dict[tuple[str, str], tuple[int, float, bytes]] = {}   # seq, time, payload
-        bus.subscribe_raw(keys.every_robot(keys.camera_rgb, "*"), self._on_frame, maxsize=4)
+        every = keys.every_robot(keys.camera_rgb, "*")
+        self._demand = OnDemand(bus, lambda: bus.subscribe_raw(every, self._on_frame, maxsize=4),
+                                name="web-pictures")
 
     def _on_frame(self, key: str, payload: bytes, stamp_ns: int) -> None:
         robot, name = keys.robot_of(key), keys.camera_of(key)
@@ -39,16 +42,25 @@ class Cameras:
 
     def names(self, robot: str) -> list[str]:
         """Cameras of `robot` that sent a frame in the last SILENT_S seconds."""
+        self._demand.want(lambda: bool(self._sending(robot)))
+        return self._sending(robot)
+
+    def _sending(self, robot: str) -> list[str]:
         now = time.monotonic()
         with self._cond:
             return sorted(n for (r, n), (_, t, _) in self._frames.items() if r == robot and now - t < SILENT_S)
 
+    def _fresh(self, robot: str, name: str) -> tuple[int, float, bytes] | None:
+        with self._cond:
+            kept = self._frames.get((robot, name))
+        return kept if kept is not None and time.monotonic() - kept[1] < SILENT_S else None
+
     def newest(self, robot: str, name: str) -> RgbImage | None:
         """The camera's newest colour image (decoded from its message now), or None while it
         sends none; the world's point cloud takes its colours from it."""
-        with self._cond:
-            kept = self._frames.get((robot, name))
-        if kept is None or time.monotonic() - kept[1] >= SILENT_S:
+        self._demand.want(lambda: self._fresh(robot, name) is not None)
+        kept = self._fresh(robot, name)
+        if kept is None:
             return None
         try:
             return messages.decode(RgbImage, kept[2])
@@ -65,6 +77,7 @@ class Cameras:
     def _stream(self, robot: str, name: str, stop: threading.Event) -> Iterator[bytes]:
         seen = 0
         while not stop.is_set():
+            self._demand.want()         # a page that watches keeps the pictures coming
             with self._cond:
                 fresh = self._cond.wait_for(
                     lambda: stop.is_set() or self._frames[(robot, name)][0] != seen, timeout=SILENT_S)
@@ -75,6 +88,10 @@ class Cameras:
                 yield messages.decode(RgbImage, payload).jpeg
             except MessageError:
                 continue
+
+
+    def close(self) -> None:
+        self._demand.close()
 
 
 def mjpeg(frames: Iterator[bytes]) -> Iterator[bytes]:

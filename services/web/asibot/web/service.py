@@ -131,6 +131,8 @@ class WebService(runtime.Service):
     def close(self) -> None:
         self.server.should_exit = True
         self.web.runner.close()
+        self.web.world.close()
+        self.web.cameras.close()
 
 
 def build(bus: Bus, args: argparse.Namespace) -> WebService:

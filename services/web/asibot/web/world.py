@@ -5,7 +5,7 @@ sentence saying why they cannot).
 
 The server keeps the newest depth image and CameraInfo of every camera on the bus (undecoded,
 as web/cameras.py keeps the colour images, whose newest frame it borrows), and decodes them only
-when a page asks. Where a camera stands in the robot's frame is the installer's calibration
+when a page asks. It subscribes to the depth images only while pages ask (asibot.bus.OnDemand). Where a camera stands in the robot's frame is the installer's calibration
 when there is one (userdata/calibration.py), else the camera's own CameraInfo.pose (the
 simulation knows it); a camera with neither asks for a calibration first. Both go through the
 same code, so a real camera and the simulated one behave the same once calibrated.
@@ -23,7 +23,7 @@ from typing import Any, Callable
 import numpy as np
 
 from asibot import depth, keys, messages, robots
-from asibot.bus import Bus
+from asibot.bus import Bus, OnDemand
 from asibot.errors import MessageError, RpcError
 from asibot.messages import CameraInfo, DepthImage
 from asibot.poses import point_rotation
@@ -66,8 +66,11 @@ class World:
         self._kept: dict[tuple[str, str, str], _Kept] = {}
         self._clouds: dict[tuple[str, str], tuple[tuple, int, bytes]] = {}   # (image, pose), N, body
         self._seen_marks: dict[tuple[str, str], np.ndarray] = {}   # a calibration mark touched, not yet paired
-        for stream, key in (("depth", keys.camera_depth), ("info", keys.camera_info)):
-            bus.subscribe_raw(keys.every_robot(key, "*"), self._keeper(stream), maxsize=2)
+        # A CameraInfo costs no rendering: it is kept all the time, the depth images on demand.
+        bus.subscribe_raw(keys.every_robot(keys.camera_info, "*"), self._keeper("info"), maxsize=2)
+        every = keys.every_robot(keys.camera_depth, "*")
+        self._depths = OnDemand(bus, lambda: bus.subscribe_raw(every, self._keeper("depth"), maxsize=2),
+                                name="web-depths")
 
     def _keeper(self, stream: str) -> Callable[[str, bytes, int], None]:
         def keep(key: str, payload: bytes, stamp_ns: int) -> None:
@@ -78,9 +81,16 @@ class World:
                     self._kept[(robot, name, stream)] = _Kept((old.seq if old else 0) + 1, time.monotonic(), payload)
         return keep
 
+    def close(self) -> None:
+        self._depths.close()
+
     # --- what is known of a camera --------------------------------------------------------
     def names(self, robot: str) -> list[str]:
         """Cameras of `robot` that sent a depth image and a CameraInfo in the last SILENT_S s."""
+        self._depths.want(lambda: bool(self._sending(robot)))
+        return self._sending(robot)
+
+    def _sending(self, robot: str) -> list[str]:
         now = time.monotonic()
         with self._lock:
             depth_names = {n for (r, n, s), k in self._kept.items() if r == robot and s == "depth" and now - k.time < SILENT_S}
@@ -98,10 +108,16 @@ class World:
                         "pose_from": self._pose_source(robot, name, info)})
         return out
 
-    def _newest(self, robot: str, name: str, stream: str) -> _Kept:
+    def _fresh(self, robot: str, name: str, stream: str) -> _Kept | None:
         with self._lock:
             kept = self._kept.get((robot, name, stream))
-        if kept is None or time.monotonic() - kept.time >= SILENT_S:
+        return kept if kept is not None and time.monotonic() - kept.time < SILENT_S else None
+
+    def _newest(self, robot: str, name: str, stream: str) -> _Kept:
+        if stream == "depth":
+            self._depths.want(lambda: self._fresh(robot, name, stream) is not None)
+        kept = self._fresh(robot, name, stream)
+        if kept is None:
             sending = ", ".join(self.names(robot)) or "none"
             raise RpcError("unavailable", f"{robot} has no depth camera {name!r} sending images; its depth cameras: {sending}.")
         return kept

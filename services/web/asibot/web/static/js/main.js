@@ -10,21 +10,28 @@ import { render as renderWizard } from './wizard.js';
 
 // The pages, in the tabs' order. A page's module is loaded when it is first shown, so a page that
 // never shows the 3D view or the program editor never parses three.js or CodeMirror (1.3 MB).
+// A module that failed is asked for again under another URL: a browser keeps a failed import.
 const VIEWS = [
-  { id: 'home', title: 'Home', load: () => import('./views/home.js') },
-  { id: 'joint', title: 'Joint', load: () => import('./views/joint.js') },
-  { id: 'cartesian', title: 'Cartesian', load: () => import('./views/cartesian.js') },
-  { id: 'pointer', title: 'Pointer', load: () => import('./views/pointer.js') },
-  { id: 'program', title: 'Program', load: () => import('./views/program.js') },
-  { id: 'speech', title: 'Speech', load: () => import('./views/speech.js') },
-  { id: 'assigner', title: 'Assigner', load: () => import('./views/assigner.js') },
-  { id: 'launcher', title: 'Launcher', load: () => import('./views/launcher.js') },
-  { id: 'video', title: 'Video', load: () => import('./views/video.js') },
-  { id: 'pioneer', title: 'Pioneer arm', load: () => import('./views/pioneer.js') },
-  { id: 'base', title: 'Base', load: () => import('./views/base.js') },
-  { id: 'access', title: 'Access', load: () => import('./views/access.js') },
+  { id: 'home', title: 'Home', module: './views/home.js' },
+  { id: 'joint', title: 'Joint', module: './views/joint.js' },
+  { id: 'cartesian', title: 'Cartesian', module: './views/cartesian.js' },
+  { id: 'pointer', title: 'Pointer', module: './views/pointer.js' },
+  { id: 'program', title: 'Program', module: './views/program.js' },
+  { id: 'speech', title: 'Speech', module: './views/speech.js' },
+  { id: 'assigner', title: 'Assigner', module: './views/assigner.js' },
+  { id: 'launcher', title: 'Launcher', module: './views/launcher.js' },
+  { id: 'video', title: 'Video', module: './views/video.js' },
+  { id: 'pioneer', title: 'Pioneer arm', module: './views/pioneer.js' },
+  { id: 'base', title: 'Base', module: './views/base.js' },
+  { id: 'access', title: 'Access', module: './views/access.js' },
 ];
 let active = null;   // { view, handle }
+const failures = new Map();   // view id -> how many times its module could not load
+
+function load(view) {
+  const tries = failures.get(view.id) || 0;
+  return import(tries ? `${view.module}?try=${tries}` : view.module);
+}
 
 let wanted = null;    // the view last asked for: a slow load that another choice overtook is not shown
 
@@ -48,11 +55,12 @@ async function show(id) {
   root.replaceChildren(el('p', { class: 'muted' }, `Loading the ${view.title} page…`));
   let module;
   try {
-    ({ default: module } = await view.load());
+    ({ default: module } = await load(view));
   } catch (e) {
+    failures.set(view.id, (failures.get(view.id) || 0) + 1);
     if (wanted !== view) return;
     wanted = null;   // choosing the tab again tries again
-    root.replaceChildren(el('p', { role: 'alert' }, `The ${view.title} page could not load (${e.message}). Check the connection, then choose its tab again.`));
+    root.replaceChildren(el('p', { role: 'alert' }, `The ${view.title} page could not load (${e.message}). Check the connection, then choose its tab again (or reload the page).`));
     root.removeAttribute('aria-busy');
     return;
   }
@@ -68,7 +76,8 @@ function tabs() {
   const bar = document.getElementById('tabs');
   bar.replaceChildren(...VIEWS.map((v) => el('button', {
     type: 'button', role: 'tab', id: `tab-${v.id}`, 'aria-controls': 'view', dataset: { view: v.id },
-    onclick: () => { location.hash = v.id; },
+    // The shown tab chosen again: no hashchange comes, so show it here (a failed page tries again).
+    onclick: () => { if (location.hash.slice(1) === v.id) show(v.id); else location.hash = v.id; },
   }, v.title)));
   // Arrow keys move between tabs, as the ARIA tabs pattern says.
   bar.addEventListener('keydown', (e) => {

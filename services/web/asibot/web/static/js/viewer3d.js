@@ -237,7 +237,8 @@ export function viewer() {
     const follow = () => {
       const robot = chosenRobot();
       if (!robot) return;
-      made.show(robot.id).catch((e) => notify(e.message));
+      // Checked here, not only in show(): the feed changes up to 30 times a second.
+      if (robot.id !== made.robotId) made.show(robot.id).catch((e) => notify(e.message));
       if (robot.joints) made.setJoints(robot.joints.names, robot.joints.deg);
     };
     shared = made;
