@@ -89,7 +89,6 @@ class Cameras:
             except MessageError:
                 continue
 
-
     def close(self) -> None:
         self._demand.close()
 

@@ -5,9 +5,10 @@ sentence saying why they cannot).
 
 The server keeps the newest depth image and CameraInfo of every camera on the bus (undecoded,
 as web/cameras.py keeps the colour images, whose newest frame it borrows), and decodes them only
-when a page asks. It subscribes to the depth images only while pages ask (asibot.bus.OnDemand). Where a camera stands in the robot's frame is the installer's calibration
-when there is one (userdata/calibration.py), else the camera's own CameraInfo.pose (the
-simulation knows it); a camera with neither asks for a calibration first. Both go through the
+when a page asks; it subscribes to the depth images only while pages ask (asibot.bus.OnDemand).
+Where a camera stands in the robot's frame is the installer's calibration when there is one
+(userdata/calibration.py), else the camera's own CameraInfo.pose (the simulation knows it); a
+camera with neither asks for a calibration first. Both go through the
 same code, so a real camera and the simulated one behave the same once calibrated.
 """
 
