@@ -26,8 +26,17 @@ class Command:
     """`asibot ARGV` in the background, its output collected line by line as it comes."""
 
     def __init__(self, *argv: str, cwd: Path | None = None, env: dict[str, str] | None = None) -> None:
-        self.proc = subprocess.Popen([sys.executable, "-m", "asibot.cli.main", *argv], cwd=cwd, env=env,
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        # PYTHONFAULTHANDLER: a SIGABRT makes it print every thread's stack (see ctrl_c).
+        env = dict(os.environ if env is None else env, PYTHONFAULTHANDLER="1")
+        # As from a terminal, where Ctrl-C is at its default. A process inherits an ignored
+        # SIGINT (the tests run in the background of a script: `cmd &` ignores it), and Python
+        # then keeps ignoring it, so a command would never hear this test's Ctrl-C.
+        inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
+        try:
+            self.proc = subprocess.Popen([sys.executable, "-m", "asibot.cli.main", *argv], cwd=cwd, env=env,
+                                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        finally:
+            signal.signal(signal.SIGINT, inherited)
         self.out: list[str] = []
         self.err: list[str] = []
         for stream, lines in ((self.proc.stdout, self.out), (self.proc.stderr, self.err)):
@@ -42,7 +51,16 @@ class Command:
 
     def ctrl_c(self, timeout: float = 20.0) -> int:
         self.proc.send_signal(signal.SIGINT)
-        code = self.proc.wait(timeout)
+        try:
+            code = self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            # Where was each thread? Its signal masks and its stacks, then the failure.
+            with open(f"/proc/{self.proc.pid}/status") as f:
+                masks = "".join(line for line in f if line.startswith(("State", "Sig", "Shd")))
+            self.proc.send_signal(signal.SIGABRT)
+            self.proc.wait(10)
+            time.sleep(0.2)
+            pytest.fail(f"still running {timeout:g} s after Ctrl-C\n{masks}{self.text()}")
         time.sleep(0.1)   # the readers take the last lines
         return code
 

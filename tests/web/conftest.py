@@ -102,6 +102,16 @@ def page(browser, kitchen, request):
         yield page
 
 
+@pytest.fixture(scope="class")
+def looking_page(browser, kitchen):
+    """One page for a class of tests that only look at views (axe, Tab), one view after another:
+    a fresh page costs about 2 s of a loaded machine each, and looking changes nothing that a
+    later look would see. A test that clicks, types or changes settings takes `page`. Closed
+    with its class, as an open page takes its share of the cores."""
+    with fresh_page(browser, kitchen.web_url) as page:
+        yield page
+
+
 def http(stack, method: str, path: str, body: dict | None = None) -> dict:
     """A call of the web's API that must succeed; its answer."""
     status, answer = stack.web(method, "/" + path.lstrip("/"), body)

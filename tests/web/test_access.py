@@ -92,10 +92,72 @@ def axe(page) -> list[str]:
     return [f"{v['id']}: {v['help']} at {[n['target'] for n in v['nodes']]}" for v in result["violations"]]
 
 
-@pytest.mark.parametrize("view", KITCHEN_VIEWS)
-def test_axe_finds_no_wcag_violation(page, task, view):
-    go(page, view)
-    assert axe(page) == []
+FOCUS_JS = """() => {
+    const n = document.activeElement;
+    const styled = [n, n.closest('.cm-editor')].filter(Boolean).map((x) => getComputedStyle(x));
+    const visible = styled.some((s) => (s.outlineStyle !== 'none' && parseFloat(s.outlineWidth) >= 2) || s.boxShadow !== 'none');
+    return { id: n.dataset.ctl || null, visible, name: (n.getAttribute('aria-label') || n.innerText || n.tagName).slice(0, 40) };
+}"""
+
+
+class TestEveryView:
+    """One page looked at view after view (conftest's looking_page): axe-core, Tab alone, 44 px
+    targets, arrow keys on the tabs."""
+
+    @pytest.mark.parametrize("view", KITCHEN_VIEWS)
+    def test_axe_finds_no_wcag_violation(self, task, looking_page, view):
+        go(looking_page, view)
+        assert axe(looking_page) == []
+
+    @pytest.mark.parametrize("view", KITCHEN_VIEWS)
+    def test_tab_alone_reaches_every_control_with_a_visible_focus(self, task, looking_page, view):
+        page = looking_page
+        go(page, view)
+        wanted = page.evaluate("""() => {
+            document.querySelectorAll('[data-ctl]').forEach((n) => { delete n.dataset.ctl; });   // an earlier view's
+            const all = [...document.querySelectorAll('#view button, #view a[href], #view input, #view select, #view textarea, #view [contenteditable=true], #estop, #connection button, #tabs [aria-selected=true]')]
+                .filter((n) => !n.disabled && n.checkVisibility());
+            all.forEach((n, i) => { n.dataset.ctl = String(i); });
+            return all.length;
+        }""")
+        page.evaluate("document.activeElement.blur()")
+        reached, hidden_focus = set(), []
+        for _ in range(wanted + 20):
+            page.keyboard.press("Tab")
+            f = page.evaluate(FOCUS_JS)
+            if f["id"] is not None:
+                reached.add(int(f["id"]))
+                if not f["visible"]:
+                    hidden_focus.append(f["name"])
+            if len(reached) == wanted:
+                break
+        missed = page.evaluate("(r) => [...document.querySelectorAll('[data-ctl]')].filter((n) => !r.includes(Number(n.dataset.ctl))).map((n) => n.getAttribute('aria-label') || n.innerText)", sorted(reached))
+        assert not missed, f"Tab never reached {missed}"
+        assert not hidden_focus, f"no visible focus on {hidden_focus}"
+
+    def test_launcher_and_jog_buttons_are_at_least_44_px(self, task, looking_page):
+        page = looking_page
+        go(page, "launcher")
+        boxes = [b.bounding_box() for b in page.locator(".task-button").all()]
+        go(page, "joint")
+        page.wait_for_function("document.querySelectorAll('.jog-grid button').length >= 10")
+        boxes += [b.bounding_box() for b in page.locator(".jog-grid button").all()]
+        go(page, "cartesian")
+        boxes += [b.bounding_box() for b in page.locator(".jog-grid button:visible, .viewer-bar button:visible").all()]
+        go(page, "access")
+        boxes += [b.bounding_box() for b in page.locator("#view button:visible").all()]
+        assert len(boxes) > 30
+        small = [b for b in boxes if b["width"] < 44 or b["height"] < 44]
+        assert not small, small
+
+    def test_arrow_keys_reach_every_tab(self, looking_page):
+        page = looking_page
+        page.get_by_role("tab", name="Home").focus()
+        names = []
+        for _ in range(len(READY)):
+            page.keyboard.press("ArrowRight")
+            names.append(page.evaluate("document.activeElement.innerText"))
+        assert names[-1] == "Home" and "Access" in names and len(set(names)) == len(READY)
 
 
 def test_axe_with_the_wizard_a_message_a_stop_and_the_scanning_ring(page, task, released):
@@ -640,64 +702,7 @@ def test_scanning_off_the_switch_key_does_nothing(page):
     assert page.locator("#scan-ring").is_hidden()
 
 
-# --- WCAG: targets, keyboard, focus, time limits, motion -----------------------------------------
-def test_launcher_and_jog_buttons_are_at_least_44_px(page, task):
-    go(page, "launcher")
-    boxes = [b.bounding_box() for b in page.locator(".task-button").all()]
-    go(page, "joint")
-    page.wait_for_function("document.querySelectorAll('.jog-grid button').length >= 10")
-    boxes += [b.bounding_box() for b in page.locator(".jog-grid button").all()]
-    go(page, "cartesian")
-    boxes += [b.bounding_box() for b in page.locator(".jog-grid button:visible, .viewer-bar button:visible").all()]
-    go(page, "access")
-    boxes += [b.bounding_box() for b in page.locator("#view button:visible").all()]
-    assert len(boxes) > 30
-    small = [b for b in boxes if b["width"] < 44 or b["height"] < 44]
-    assert not small, small
-
-
-FOCUS_JS = """() => {
-    const n = document.activeElement;
-    const styled = [n, n.closest('.cm-editor')].filter(Boolean).map((x) => getComputedStyle(x));
-    const visible = styled.some((s) => (s.outlineStyle !== 'none' && parseFloat(s.outlineWidth) >= 2) || s.boxShadow !== 'none');
-    return { id: n.dataset.ctl || null, visible, name: (n.getAttribute('aria-label') || n.innerText || n.tagName).slice(0, 40) };
-}"""
-
-
-@pytest.mark.parametrize("view", KITCHEN_VIEWS)
-def test_tab_alone_reaches_every_control_with_a_visible_focus(page, task, view):
-    go(page, view)
-    wanted = page.evaluate("""() => {
-        const all = [...document.querySelectorAll('#view button, #view a[href], #view input, #view select, #view textarea, #view [contenteditable=true], #estop, #connection button, #tabs [aria-selected=true]')]
-            .filter((n) => !n.disabled && n.checkVisibility());
-        all.forEach((n, i) => { n.dataset.ctl = String(i); });
-        return all.length;
-    }""")
-    page.evaluate("document.activeElement.blur()")
-    reached, hidden_focus = set(), []
-    for _ in range(wanted + 20):
-        page.keyboard.press("Tab")
-        f = page.evaluate(FOCUS_JS)
-        if f["id"] is not None:
-            reached.add(int(f["id"]))
-            if not f["visible"]:
-                hidden_focus.append(f["name"])
-        if len(reached) == wanted:
-            break
-    missed = page.evaluate("(r) => [...document.querySelectorAll('[data-ctl]')].filter((n) => !r.includes(Number(n.dataset.ctl))).map((n) => n.getAttribute('aria-label') || n.innerText)", sorted(reached))
-    assert not missed, f"Tab never reached {missed}"
-    assert not hidden_focus, f"no visible focus on {hidden_focus}"
-
-
-def test_arrow_keys_reach_every_tab(page):
-    page.get_by_role("tab", name="Home").focus()
-    names = []
-    for _ in range(len(READY)):
-        page.keyboard.press("ArrowRight")
-        names.append(page.evaluate("document.activeElement.innerText"))
-    assert names[-1] == "Home" and "Access" in names and len(set(names)) == len(READY)
-
-
+# --- WCAG: time limits, motion (targets and keyboard: TestEveryView) -------------------------------
 def test_good_news_stays_while_pointed_at_or_when_kept(page):
     go(page, "speech")
     notice = page.locator("#notice")

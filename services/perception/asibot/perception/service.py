@@ -236,7 +236,7 @@ class PerceptionService(Service):
         except BadInput as exc:
             raise RpcError("bad_request", _sentence(exc)) from None
         name = self.opt.rgb_camera
-        if not name or self._pictures is None:
+        if not name or self._pictures is None:     # one means the other; both tell mypy
             raise RpcError("unavailable", "This perception service runs without an RGB camera (--rgb-camera).")
         self._pictures.want(lambda: self._rgb is not None and self.clock() - self._rgb[1] <= RGB_STALE_S)
         rgb, cam, now = self._rgb, self._cams[name], self.clock()

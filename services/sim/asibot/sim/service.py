@@ -13,6 +13,7 @@ its sender exits (asibot.safety.estop). Beside the driver contract's verbs it se
 from __future__ import annotations
 
 import argparse
+import collections
 import logging
 import math
 import threading
@@ -111,7 +112,8 @@ class SimService(Service):
         self._cameras_ready = threading.Event()
         if options.camera_hz <= 0:
             self._cameras_ready.set()
-        self._frames = 0
+        self._frames = 0                          # camera frames (CameraInfo sent for each camera)
+        self._rendered: collections.Counter[str] = collections.Counter()   # pictures rendered, by kind
         self._rtf = 0.0
         self._published = 0                       # physics ticks published, under _tick_done
         self._tick_done = threading.Condition()
@@ -256,8 +258,10 @@ class SimService(Service):
                     # sensor is inactive without subscribers. The first frame warms the GL contexts.
                     if "depth" in CAMERA_KINDS[c.name] and (first or p["depth"].matching()):
                         p["depth"].put(m.DepthImage(depth=c.depth(data, opt.depth_method), stamp=stamp))
+                        self._rendered["depth"] += 1
                     if "rgb" in CAMERA_KINDS[c.name] and (first or p["rgb"].matching()):
                         p["rgb"].put(c.rgb_jpeg(data, stamp))
+                        self._rendered["rgb"] += 1
                 self._frames += 1
                 if first:
                     first = False
@@ -283,7 +287,7 @@ class SimService(Service):
 
     def health(self) -> dict:
         return {"world": self.sim.world, "sim_time": round(self.sim.time, 3), "rtf": round(self._rtf, 3),
-                "camera_frames": self._frames, "estop": self.sim.estop, "arm_mode": self.sim.arm.mode,
+                "camera_frames": self._frames, "pictures_rendered": dict(self._rendered), "estop": self.sim.estop, "arm_mode": self.sim.arm.mode,
                 **self.contract.health()}
 
     def close(self) -> None:

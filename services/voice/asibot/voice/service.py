@@ -36,6 +36,7 @@ from asibot.safety import estop
 from asibot import keys, messages, runtime, verbs
 from asibot.files import data_dir, write_atomic
 from asibot.bus import Bus
+from asibot.client import TasksClient
 from asibot.errors import RpcError, Unavailable
 from asibot.safety.estop import who
 from asibot.safety.identity import Identity
@@ -107,6 +108,8 @@ class BusRobots:
 
     def __init__(self, bus: Bus, robot: str, timeout: float = CALL_TIMEOUT) -> None:
         self.bus, self.robot, self.timeout = bus, robot, timeout
+        self._tasks = TasksClient.on(bus, robot, timeout)       # the web's tasks, as a program calls them
+        self._listing = TasksClient.on(bus, robot, LIST_TIMEOUT)
         self.me = Identity("voice")     # signs its estops (asibot.safety.estop)
         self._lock = threading.Lock()
         self._live: set[str] = set()
@@ -124,7 +127,7 @@ class BusRobots:
 
     def launch(self, task: str) -> None:
         try:
-            self.bus.call(keys.tasks_rpc("launch"), {"task": task, "robot": self.robot}, timeout=self.timeout)
+            self._tasks.launch(task)
         except Unavailable:
             raise Unavailable("The Task Creator is not running, so no task can start.") from None
 
@@ -134,7 +137,7 @@ class BusRobots:
             estop.latch(self.bus, robot, self.me, True, '"stop" said to the voice service', who("voice"))
         problems = []
         try:
-            self.bus.call(keys.tasks_rpc("stop"), timeout=self.timeout)
+            self._tasks.stop()
         except Unavailable:
             pass                                     # no Task Creator: no task of its runs
         except RpcError as exc:
@@ -142,7 +145,10 @@ class BusRobots:
         return Stopped(tuple(robots), tuple(problems))
 
     def tasks(self) -> list:
-        tasks = self.bus.call(keys.tasks_rpc("list"), timeout=LIST_TIMEOUT).get("tasks")
+        try:
+            tasks = self._listing.tasks()
+        except KeyError:
+            tasks = None
         if not isinstance(tasks, list):
             raise RpcError("internal", "The Task Creator's list of tasks is not a list.")
         return tasks

@@ -101,6 +101,7 @@ class World:
     def listing(self, robot: str) -> list[dict[str, Any]]:
         """The depth cameras of `robot` as the page needs them: picture size, whether it has a
         colour picture to touch, and where its pose comes from ("calibration", "camera", None)."""
+        self._depths.want()     # subscribed now: the wait for pictures below is the wait for depth too
         colour = set(self.cameras.names(robot))
         out = []
         for name in self.names(robot):
