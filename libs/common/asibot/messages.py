@@ -2,9 +2,9 @@
 
 Every message has `stamp` (ns, producer clock). numpy arrays travel as a msgpack ext type
 (dtype, shape, raw bytes), not as lists of floats: encoding copies an array's buffer once, into
-the message, and decoding copies it once too (msgpack's ext data), into a read-only array. Decoding
-checks every field against the dataclass annotation and raises MessageError naming the field,
-so a receiver can reject bad input, count it and keep running.
+the message, and decoding a large message copies none: its arrays are read-only views onto the
+payload. Decoding checks every field against the dataclass annotation and raises MessageError
+naming the field, so a receiver can reject bad input, count it and keep running.
 """
 
 from __future__ import annotations
@@ -43,14 +43,23 @@ def now_ns() -> int:
 #   and hand-written ext/bin headers, and copies each array's buffer once, straight into the
 #   message (b"".join), instead of tobytes(), head + bytes, packb's buffer and packb's result
 #   (four copies, three alive at once);
-# - decoding makes each array a read-only view (np.frombuffer) onto the ext data msgpack
-#   hands its ext_hook, instead of copying it again through an Unpacker (one copy, not two).
+# - decoding a large message (from _VIEW_MIN) reads its map and each array's ext header by
+#   hand and makes the array a read-only view (np.frombuffer) onto the payload itself; msgpack
+#   reads only the small values around the arrays. msgpack-python cannot do this alone: it
+#   copies every ext's data into a new bytes before its ext_hook sees it (~60-130 us per MiB).
+#   Smaller messages go through msgpack.unpackb, their arrays views onto that copy.
 #
 # The bytes are the same either way: tests/common/test_messages_arrays.py compares them with
 # msgpack.packb and an ExtType.
 
 #: Values of a top-level map from this size are spliced into the message, not re-packed.
 _SPLICE_MIN = 16 * 1024
+#: Messages from this size are decoded with their arrays as views onto the payload (_unpack_map).
+#: Reading a map that way costs a few us more than msgpack.unpackb (~10 with cold caches, as
+#: after a large receive): about what copying 100 KB costs, so smaller messages are not worth it.
+_VIEW_MIN = 128 * 1024
+#: What msgpack's Unpacker is fed at a time around the arrays of a large map (it copies what it is fed).
+_FEED = 4096
 #: Longest [dtype, shape] head of an array (a 64-dimension shape of uint64 takes ~600 bytes).
 _HEAD_MAX = 1024
 #: First buffer of our Packers. msgpack.packb's starts at 256 KiB, and allocating and freeing
@@ -61,6 +70,9 @@ _PACK_BUF = 4096
 _U8, _U16, _U32 = struct.Struct(">BB"), struct.Struct(">BH"), struct.Struct(">BI")
 _EXT8, _EXT16, _EXT32 = struct.Struct(">BBb"), struct.Struct(">BHb"), struct.Struct(">BIb")
 _FIXEXT = {1: 0xD4, 2: 0xD5, 4: 0xD6, 8: 0xD7, 16: 0xD8}
+#: The ext forms an array of more than a few bytes takes, and the bin forms, by their first byte.
+_EXT_FORMS = {0xC7: _EXT8, 0xC8: _EXT16, 0xC9: _EXT32}
+_BIN_FORMS = {0xC4: _U8, 0xC5: _U16, 0xC6: _U32}
 
 
 class _BadArray(ValueError):
@@ -192,6 +204,108 @@ def _ext_hook(code: int, data: bytes) -> Any:
     return _array(data, 0, len(data))
 
 
+def _unpacker(max_size: int) -> msgpack.Unpacker:
+    """A streaming Unpacker with the options of `unpack` (limits as unpackb sets them). Its
+    first buffer is small: by default it would allocate min(max_size, 1 MiB) each time."""
+    return msgpack.Unpacker(ext_hook=_ext_hook, raw=False, strict_map_key=False,
+                            max_buffer_size=max_size, read_size=min(_FEED, max_size))
+
+
+def _bulk_at(buf: bytes, pos: int) -> tuple[bool, int, int] | None:
+    """(whether it is an array, start, end of its data) when an NDARRAY_EXT or a bin starts at
+    buf[pos]; None when anything else does, or when it is truncated (msgpack says what is wrong)."""
+    if pos >= len(buf):
+        return None
+    first = buf[pos]
+    form = _EXT_FORMS.get(first) or _BIN_FORMS.get(first)
+    if form is None or pos + form.size > len(buf):
+        return None
+    fields = form.unpack_from(buf, pos)
+    start, end = pos + form.size, pos + form.size + fields[1]
+    is_array = first in _EXT_FORMS
+    if end > len(buf) or (is_array and fields[2] != NDARRAY_EXT):
+        return None
+    return is_array, start, end
+
+
+def _fixstr_at(buf: bytes, pos: int) -> tuple[str, int] | None:
+    """(the text, its end) when a str of up to 31 bytes (a field name) starts at buf[pos]."""
+    if pos >= len(buf) or not 0xA0 <= buf[pos] <= 0xBF:
+        return None
+    end = pos + 1 + (buf[pos] & 0x1F)
+    return (buf[pos + 1:end].decode(), end) if end <= len(buf) else None
+
+
+class _Reader:
+    """Reads the values of `buf` one after another from `pos`. An array is made a view onto
+    `buf`, and a bin is sliced out of it (one copy, as msgpack makes; fed to the Unpacker, a
+    large one would be copied on each feed). Any other value is read by a msgpack Unpacker fed
+    `buf` a piece at a time, so that it copies the small values around the arrays (and at most
+    a piece of an array)."""
+
+    def __init__(self, buf: bytes, pos: int) -> None:
+        self.buf = buf
+        self.pos = pos
+        self._unpacker: msgpack.Unpacker | None = None
+        self._start = self._fed = pos  # where the Unpacker's stream starts, and how far it was fed
+
+    def next(self) -> Any:
+        bulk = _bulk_at(self.buf, self.pos)
+        if bulk is not None:
+            is_array, start, end = bulk
+            self.pos = end
+            self._unpacker = None  # it may have been fed the first bytes of this: restart after it
+            return _array(self.buf, start, end) if is_array else self.buf[start:end]
+        unpacker = self._unpacker
+        if unpacker is None:
+            # A key after an array (or first in the map) needs no Unpacker: making one costs ~1 us.
+            text = _fixstr_at(self.buf, self.pos)
+            if text is not None:
+                value, self.pos = text
+                return value
+            unpacker = self._unpacker = _unpacker(len(self.buf))
+            self._start = self._fed = self.pos
+            self._feed(unpacker)  # before the first unpack: an OutOfData costs as much as the Unpacker
+        while True:
+            try:
+                value = unpacker.unpack()
+                break
+            except msgpack.OutOfData:  # the value goes on past what was fed
+                if self._fed >= len(self.buf):
+                    raise
+                self._feed(unpacker)
+        self.pos = self._start + unpacker.tell()
+        return value
+
+    def _feed(self, unpacker: msgpack.Unpacker) -> None:
+        # Pieces double, so a large value that is not an array takes a few feeds, not thousands.
+        piece = max(_FEED, self._fed - self._start)
+        unpacker.feed(memoryview(self.buf)[self._fed:self._fed + piece])
+        self._fed += piece
+
+
+def _is_fixmap(first: int) -> bool:
+    """A map of at most 15 entries, as every message is. A wider one is a table (an RPC reply),
+    which msgpack reads faster in one go than _Reader does entry by entry."""
+    return 0x80 <= first <= 0x8F
+
+
+def _unpack_map(buf: bytes) -> dict:
+    """msgpack.unpackb of a fixmap, except that its large arrays are read-only views onto `buf`."""
+    reader = _Reader(buf, 1)
+    result = {}
+    left = buf[0] & 0x0F
+    while left and len(buf) - reader.pos >= _VIEW_MIN:
+        key = reader.next()
+        result[key] = reader.next()
+        left -= 1
+    # The rest holds no array worth a view: msgpack reads it in one go, as a map of what is left
+    # (which also raises on bytes after the message), instead of value by value.
+    rest = b"".join((bytes((0x80 | left,)), memoryview(buf)[reader.pos:]))
+    result.update(msgpack.unpackb(rest, ext_hook=_ext_hook, raw=False, strict_map_key=False))
+    return result
+
+
 def pack(obj: Any) -> bytes:
     """Encode any msgpack-able value (dicts for RPC, messages' maps) with numpy support.
 
@@ -213,12 +327,17 @@ def _packer() -> msgpack.Packer:
 def unpack(data: bytes) -> Any:
     """Decode bytes produced by `pack`; raises MessageError on garbage.
 
-    Arrays come back read-only, as views onto msgpack's copy of their ext data (the one copy
-    msgpack-python allows on decoding). A view may be unaligned for its dtype (a DepthImage's
-    float32 pixels start at an odd offset), which numpy handles, a little slower in some
-    loops. A receiver that writes into an array, or wants it aligned, copies it: `arr.copy()`.
+    Arrays come back read-only. In a message of `_VIEW_MIN` bytes or more they are views onto
+    `data` itself (no copy), so any one of them keeps all of `data` alive; in anything else,
+    views onto msgpack's copy of their ext data. Only bytes get views: a bytearray or
+    memoryview could change under them, so it is decoded by msgpack, which copies. A view may
+    be unaligned for its dtype (a DepthImage's float32 pixels start at an odd offset), which
+    numpy handles, a little slower in some loops. A receiver that writes into an array, or
+    wants it aligned, copies it: `arr.copy()`.
     """
     try:
+        if type(data) is bytes and len(data) >= _VIEW_MIN and _is_fixmap(data[0]):
+            return _unpack_map(data)
         return msgpack.unpackb(data, ext_hook=_ext_hook, raw=False, strict_map_key=False)
     except _BadArray as exc:
         raise MessageError("payload", "", f"not a valid array: {exc}") from None

@@ -453,15 +453,19 @@ class Drain:
         if first and self._prelude is not None:
             for item in _guarded_list(self._prelude):
                 _guarded(self._handle, item)
+        recv, handle = self._recv, self._handle
         while True:
             try:
-                item = self._recv()
+                item = recv()
             except Exception as exc:  # undeclared or session closed: the channel is finished
                 if not self._closing:   # nobody closed it: from now on nothing arrives, say so
                     log.warning("%s: its channel ended before close() (%s: %s); nothing more will "
                                 "arrive on it", self._name, type(exc).__name__, exc)
                 return
-            _guarded(self._handle, item)
+            try:  # _guarded, inlined: a call less per sample (the recorder takes 100 k a second)
+                handle(item)
+            except Exception:
+                log.exception("callback failed")
 
     @property
     def running(self) -> bool:

@@ -191,6 +191,7 @@ class RecorderService(runtime.Service):
         self.retention = retention
         self.directory = Path(directory)
         self.exclude = list(exclude or [])
+        self._excluded: dict[str, bool] = {}  # per key, decided once: fnmatch costs ~1 us a pattern
         self.skipped = 0
         self.removed = 0
         self._prune_now = threading.Event()
@@ -203,7 +204,10 @@ class RecorderService(runtime.Service):
                  f"{camera_hz:g} Hz" if camera_hz else "every frame", describe(retention))
 
     def _on_sample(self, key: str, payload: bytes, t_ns: int) -> None:
-        if self.exclude and any(fnmatch.fnmatchcase(key, p) for p in self.exclude):
+        excluded = self._excluded.get(key)
+        if excluded is None:
+            excluded = self._excluded[key] = any(fnmatch.fnmatchcase(key, p) for p in self.exclude)
+        if excluded:
             self.skipped += 1
             return
         if not self.thinner.keep(key, t_ns):
