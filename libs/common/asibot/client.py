@@ -25,19 +25,63 @@ CALL_TIMEOUT = 5.0
 WAIT_POLL = 0.2
 
 
-class _Client:
-    """What the user's clients share: one robot, one bus connection, calls with a timeout,
-    and the robot's emergency stop."""
+class _ServiceClient:
+    """What every client shares: one bus connection and calls with a timeout. `on(bus, ...)`
+    borrows a service's own bus (the web's, the bridge's), which `close` leaves open."""
 
-    #: The verb whose answer says the service is there, and how to start it, for `open`.
+    #: The verb whose answer says the service is there, and its name for `open`'s sentence.
     _probe = ""
     _service = ""
 
-    def __init__(self, robot: str | None = None, timeout: float = CALL_TIMEOUT) -> None:
-        self.robot: str | None = None
+    def __init__(self, timeout: float = CALL_TIMEOUT) -> None:
         self.timeout = timeout
         self._bus: Bus | None = None
         self._owns_bus = True
+
+    def _key(self, verb: str) -> str:
+        raise NotImplementedError
+
+    def _not_answering(self) -> str:
+        """The sentence of `open` when the service does not answer: how to start it."""
+        return f"No {self._service} service answers; start it with `python -m asibot.{self._service}`."
+
+    def _connect(self) -> None:
+        """A bus of our own if none is borrowed, and the service answering on it."""
+        if self._bus is None:
+            self._bus = Bus("client", wait=self.timeout)
+        if not self._bus.wait_for(self._key(self._probe), timeout=self.timeout):
+            raise RpcError("unavailable", self._not_answering())
+
+    def _connected(self) -> Bus:
+        if self._bus is None:
+            self._connect()
+        assert self._bus is not None
+        return self._bus
+
+    def close(self) -> None:
+        """Disconnect (a `with` block of the client does it at its end)."""
+        if self._bus is not None and self._owns_bus:
+            self._bus.close()
+        self._bus = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _call(self, verb: str, _timeout: float | None = None, **request: object) -> dict:
+        bus = self._connected()
+        body = {k: list(v) if isinstance(v, (tuple, list)) else v for k, v in request.items() if v is not None}
+        return bus.call(self._key(verb), body, timeout=_timeout or self.timeout)
+
+
+class _Client(_ServiceClient):
+    """What the clients of one robot's service share: the robot, and its emergency stop."""
+
+    def __init__(self, robot: str | None = None, timeout: float = CALL_TIMEOUT) -> None:
+        super().__init__(timeout)
+        self.robot: str | None = None
         self._identity: Identity | None = None
         if robot:
             self.open(robot)
@@ -59,35 +103,15 @@ class _Client:
         client._bus, client._owns_bus, client.robot = bus, False, robot.strip("/")
         return client
 
-    def _key(self, verb: str) -> str:
-        raise NotImplementedError
-
     def open(self, robot: str) -> bool:
         """Connect to the service of `robot`; raises Unavailable if it does not answer."""
-        if self._bus is None:
-            self._bus = Bus("client", wait=self.timeout)
         self.robot = robot.strip("/")
-        if not self._bus.wait_for(self._key(self._probe), timeout=self.timeout):
-            raise RpcError("unavailable", f"No {self._service} service answers for robot {self.robot!r}; "
-                                          f"start it with `python -m asibot.{self._service} --robot {self.robot}`.")
+        self._connect()
         return True
 
-    def close(self) -> None:
-        """Disconnect from the robot (a `with` block of the client does it at its end)."""
-        if self._bus is not None and self._owns_bus:
-            self._bus.close()
-        self._bus = None
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    def _call(self, verb: str, _timeout: float | None = None, **request: object) -> dict:
-        bus = self._connected()
-        body = {k: list(v) if isinstance(v, (tuple, list)) else v for k, v in request.items() if v is not None}
-        return bus.call(self._key(verb), body, timeout=_timeout or self.timeout)
+    def _not_answering(self) -> str:
+        return (f"No {self._service} service answers for robot {self.robot!r}; "
+                f"start it with `python -m asibot.{self._service} --robot {self.robot}`.")
 
     def _connected(self) -> Bus:
         if self._bus is None or self.robot is None:
@@ -242,8 +266,13 @@ class TasksClient(_Client):
         return keys.tasks_rpc(verb)
 
     def tasks(self) -> list[dict]:
-        """Every task: {"name", "program", "words"}, `words` being what a user says to launch it."""
-        return self._call("list")["tasks"]
+        """Every task: {"name", "program", "words"}, `words` being what a user says to launch it.
+        RpcError "internal" when the reply holds no list of tasks (a Task Creator of another
+        version)."""
+        tasks = self._call("list").get("tasks")
+        if not isinstance(tasks, list):
+            raise RpcError("internal", "The Task Creator's reply holds no list of tasks.")
+        return tasks
 
     def launch(self, task: str) -> dict:
         """Start the task named `task` on this client's robot, as the Launcher's button does:
@@ -260,6 +289,63 @@ class TasksClient(_Client):
         """The program runner's state: {"program", "robot", "pid", "running", "started", "last"},
         `last` saying how the previous run ended."""
         return self._call("status")
+
+
+class VoiceClient(_ServiceClient):
+    """The voice service's verbs (one voice service on a machine, so they name no robot):
+    `voice = VoiceClient(); voice.learn("give me the red can", source="web-1")`. The first call
+    connects (Unavailable when the service does not run)."""
+
+    _probe, _service = "status", "voice"
+    #: How much longer than its listening `learn` waits for the answer, s.
+    LEARN_MARGIN = 10.0
+
+    @classmethod
+    def on(cls, bus: Bus, timeout: float = CALL_TIMEOUT) -> Self:
+        """A client over a bus its caller owns (the web's), without waiting for the service."""
+        client = cls(timeout=timeout)
+        client._bus, client._owns_bus = bus, False
+        return client
+
+    def _key(self, verb: str) -> str:
+        return keys.voice_rpc(verb)
+
+    def status(self) -> dict:
+        """The words listened for, the sources heard, the settings and the words learned."""
+        return self._call("status")
+
+    def settings(self, confirm: bool | None = None) -> bool:
+        """Whether a task heard is first confirmed by a yes ("Shall I start ...?"), changed first
+        when `confirm` is given (kept in the user's data folder)."""
+        return self._call("settings", confirm=confirm)["confirm"]
+
+    def learn(self, word: str, *, source: str, seconds: float = 8.0) -> dict:
+        """Learn how the user says `word` from the next thing said on the live audio `source`
+        (a page's microphone: "web-<page id>") within `seconds`: {"phrase", "phones", "sayings" kept,
+        "matched" (would the recogniser have heard it already), "heard", "dropped", "seconds"}.
+        RpcError "timeout" when nothing was said."""
+        return self._without_ok(self._call("learn", self.LEARN_MARGIN + seconds, word=word, source=source,
+                                        seconds=seconds))
+
+    def learn_recording(self, word: str, data: bytes, rate: int, sample: str = "int16", channels: int = 1) -> dict:
+        """Learn how the user says `word` from a recording of it (the AudioChunk fields; quiet
+        around the word, a few seconds at most), as `learn` answers."""
+        return self._without_ok(self._call("learn", self.LEARN_MARGIN, word=word, data=data, rate=rate,
+                                        sample=sample, channels=channels))
+
+    def forget(self, word: str) -> dict:
+        """Forget the user's own pronunciations of `word` (the dictionary's stay): {"phrase",
+        "forgotten": how many}."""
+        return self._without_ok(self._call("forget", word=word))
+
+    def learned(self, words: Sequence[str] = ()) -> dict:
+        """{"words": {phrase: [phones, ...]}, "phrases": {word: phrase}}: every phrase learned by
+        saying it, and the phrase each of the user's `words` is learned under."""
+        return self._without_ok(self._call("learned", words=list(words)))
+
+    @staticmethod
+    def _without_ok(reply: dict) -> dict:
+        return {k: v for k, v in reply.items() if k != "ok"}
 
 
 class NavClient(_Client):
@@ -431,16 +517,10 @@ class DriverClient(_Client):
     def _key(self, verb: str) -> str:
         return keys.driver_rpc(self._opened(), verb)
 
-    def open(self, robot: str) -> bool:
-        """Connect to the driver of `robot`; raises Unavailable if none answers. (A driver is one
-        of several services, so the sentence names them all, not one `python -m`.)"""
-        if self._bus is None:
-            self._bus = Bus("client", wait=self.timeout)
-        self.robot = robot.strip("/")
-        if not self._bus.wait_for(self._key(self._probe), timeout=self.timeout):
-            raise RpcError("unavailable", f"No driver answers for robot {self.robot!r}; start its driver "
-                                          "(arm_driver, base_driver) or the sim, e.g. with `asibot up`.")
-        return True
+    def _not_answering(self) -> str:
+        # A driver is one of several services: the sentence names them all, not one `python -m`.
+        return (f"No driver answers for robot {self.robot!r}; start its driver (arm_driver, base_driver) "
+                "or the sim, e.g. with `asibot up`.")
 
     def status(self) -> dict:
         """What the driver says of itself ("mode", "fault", "estop", ...), its "robot" and who

@@ -287,8 +287,8 @@ class SimService(Service):
 
     def health(self) -> dict:
         return {"world": self.sim.world, "sim_time": round(self.sim.time, 3), "rtf": round(self._rtf, 3),
-                "camera_frames": self._frames, "pictures_rendered": dict(self._rendered), "estop": self.sim.estop, "arm_mode": self.sim.arm.mode,
-                **self.contract.health()}
+                "camera_frames": self._frames, "pictures_rendered": dict(self._rendered),
+                "estop": self.sim.estop, "arm_mode": self.sim.arm.mode, **self.contract.health()}
 
     def close(self) -> None:
         self.contract.close()

@@ -145,13 +145,7 @@ class BusRobots:
         return Stopped(tuple(robots), tuple(problems))
 
     def tasks(self) -> list:
-        try:
-            tasks = self._listing.tasks()
-        except KeyError:
-            tasks = None
-        if not isinstance(tasks, list):
-            raise RpcError("internal", "The Task Creator's list of tasks is not a list.")
-        return tasks
+        return self._listing.tasks()
 
 
 class VoiceService(runtime.Service):

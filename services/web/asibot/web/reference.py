@@ -17,6 +17,8 @@ from asibot.client import CartesianClient, NavClient
 
 #: The clients the reference describes: the arm's and the mobile base's.
 CLIENTS: tuple[type, ...] = (CartesianClient, NavClient)
+#: What a program does first and last with a client: listed before its other methods.
+LIFECYCLE = ("open", "close")
 
 #: Where a docstring's first sentence ends: a stop, then a capital letter starts the next one.
 _SENTENCE_END = re.compile(r"(?<=[.!?])\s+(?=[A-Z])")
@@ -38,14 +40,16 @@ def _built() -> dict[str, Any]:
 
 def methods(cls: type) -> Iterator[tuple[str, Callable[..., Any]]]:
     """The methods a program calls on an instance of `cls`: public, not class or static methods
-    (`on` makes a client for a service, over the service's bus), an override where there is one."""
-    seen: set[str] = set()
+    (`on` makes a client for a service, over the service's bus), an override where there is one;
+    connecting and closing first, then the bases' methods before the client's own."""
+    found: dict[str, Callable[..., Any]] = {}
     for klass in reversed(cls.__mro__):
         for name, value in vars(klass).items():
-            if name.startswith("_") or name in seen or not inspect.isfunction(value):
-                continue
-            seen.add(name)
-            yield name, getattr(cls, name)
+            if not name.startswith("_") and name not in found and inspect.isfunction(value):
+                found[name] = getattr(cls, name)
+    first = [n for n in LIFECYCLE if n in found]
+    for name in first + [n for n in found if n not in LIFECYCLE]:
+        yield name, found[name]
 
 
 def method(name: str, fn: Callable[..., Any]) -> dict[str, str]:

@@ -11,10 +11,12 @@ the next thing a page's microphone hears as the user's own way of saying a word.
 
 from __future__ import annotations
 
-from typing import Any, Callable
+import contextlib
+from typing import Any, Callable, Iterator
 
 from asibot import keys
 from asibot.bus import Bus
+from asibot.client import VoiceClient
 from asibot.errors import RpcError, Timeout, Unavailable
 from asibot.messages import AudioChunk, Event, VoiceHeard
 
@@ -23,7 +25,7 @@ from asibot.messages import AudioChunk, Event, VoiceHeard
 RATES = (8000, 48000)
 LONGEST_S = 1.0
 #: The voice service answers at once, except `learn`, which waits for the word to be said.
-CALL_TIMEOUT, LEARN_MARGIN = 3.0, 10.0
+CALL_TIMEOUT = 3.0
 
 
 class MicError(ValueError):
@@ -47,6 +49,7 @@ class VoiceRelay:
 
     def __init__(self, bus: Bus, send: Callable[[dict[str, Any]], None]) -> None:
         self.bus, self.send = bus, send
+        self.voice = VoiceClient.on(bus, timeout=CALL_TIMEOUT)
         self._publishers: dict[str, Any] = {}
         bus.subscribe(keys.voice_heard(), VoiceHeard, self._on_heard, maxsize=50)
 
@@ -73,32 +76,36 @@ class VoiceRelay:
     def settings(self, confirm: bool | None = None) -> dict[str, Any]:
         """The voice service's settings (`confirm`: ask yes first before a task heard starts),
         changed first when `confirm` is given. RpcError unavailable when it does not run."""
-        request = {} if confirm is None else {"confirm": confirm}
-        return {"confirm": self._call("settings", request, "this setting can be changed")["confirm"]}
+        with _running("this setting can be changed"):
+            return {"confirm": self.voice.settings(confirm)}
 
     def learn(self, word: str, page_id: str, seconds: float) -> dict[str, Any]:
         """Learn how the user says `word` from the next thing this page's microphone hears, within
         `seconds` (the page listens already): the phones, the sayings kept, whether it matched."""
-        return self._call("learn", {"word": word, "source": source_of(page_id), "seconds": seconds},
-                          "words can be learned", timeout=seconds + LEARN_MARGIN)
+        with _running("words can be learned"):
+            return self.voice.learn(word, source=source_of(page_id), seconds=seconds)
 
     def forget(self, word: str) -> dict[str, Any]:
         """Forget the user's own pronunciations of `word`."""
-        return self._call("forget", {"word": word}, "words can be forgotten")
+        with _running("words can be forgotten"):
+            return self.voice.forget(word)
 
     def learned(self, words: list[str]) -> dict[str, Any]:
         """{"words": {phrase: [phones, ...]}, "phrases": {word: phrase}}: the words learned by
         saying them, and the phrase each of the user's `words` is learned under."""
-        return self._call("learned", {"words": words}, "the words learned can be shown")
-
-    def _call(self, verb: str, request: dict, then: str, timeout: float = CALL_TIMEOUT) -> dict[str, Any]:
-        try:
-            reply = self.bus.call(keys.voice_rpc(verb), request, timeout=timeout)
-        except (Unavailable, Timeout):
-            raise RpcError("unavailable", "The voice service is not running: `asibot up` starts it "
-                                          f"(service voice), and then {then}.") from None
-        return {k: v for k, v in reply.items() if k != "ok"}
+        with _running("the words learned can be shown"):
+            return self.voice.learned(words)
 
     def _on_heard(self, heard: VoiceHeard) -> None:
         msg = {name: getattr(heard, name) for name in heard._fields if name != "stamp"}
         self.send({"type": "heard", **msg})
+
+
+@contextlib.contextmanager
+def _running(then: str) -> Iterator[None]:
+    """A call of the voice service, whose absence the page's user is told how to mend."""
+    try:
+        yield
+    except (Unavailable, Timeout):
+        raise RpcError("unavailable", "The voice service is not running: `asibot up` starts it "
+                                      f"(service voice), and then {then}.") from None
