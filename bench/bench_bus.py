@@ -1,7 +1,10 @@
 """Bus benchmark: our layer beside raw zenoh-python, measured in the same run.
 
-Prints one markdown table. Latency is half the round trip between two processes through
-one router on loopback (no clock comparison between processes needed).
+Prints two markdown tables. The first: latency is half the round trip between two processes
+through one router on loopback (no clock comparison between processes needed). The second, in
+one process, what a large message and the recorder cost without the bus: decoding a 1 MiB
+depth image beside msgpack's own path (which copies every array, as decoding did before), and
+our MCAP writer beside the mcap library's.
 
     python bench/bench_bus.py [--quick]
 """
@@ -9,6 +12,7 @@ one router on loopback (no clock comparison between processes needed).
 from __future__ import annotations
 
 import argparse
+import io
 import subprocess
 import sys
 import tempfile
@@ -16,6 +20,7 @@ import threading
 import time
 from pathlib import Path
 
+import mcap.writer
 import numpy as np
 import zenoh
 
@@ -23,6 +28,7 @@ from asibot import messages as m
 from asibot.bus import Bus
 from asibot.bus.zenoh_backend import client_config
 from asibot.recorder.recorder import RecorderService
+from asibot.recorder.writer import LeanWriter
 from asibot.testing import router
 
 from table import QUICK_HELP  # bench/table.py: run as `python bench/<name>.py`
@@ -208,11 +214,55 @@ def raw_receive_rate(endpoint: str, n: int) -> float:
     return count[0] / elapsed
 
 
+def best_of(f, n: int, rounds: int = 5) -> float:
+    """The best time of `rounds` rounds of `n` calls of f, per call, s (after one warm-up call)."""
+    f()
+    best = float("inf")
+    for _ in range(rounds):
+        t0 = time.perf_counter()
+        for _ in range(n):
+            f()
+        best = min(best, (time.perf_counter() - t0) / n)
+    return best
+
+
+def decode_times(n: int) -> tuple[float, float]:
+    """Decoding a 1 MiB DepthImage, s: ours (the arrays are views onto the payload) and through
+    msgpack's own path, which the decoder takes for anything but bytes (it copies each array)."""
+    data = m.encode(m.DepthImage(depth=np.random.rand(512, 512).astype(np.float32), stamp=1))
+    copied = bytearray(data)
+    return best_of(lambda: m.decode(m.DepthImage, data), n), best_of(lambda: m.decode(m.DepthImage, copied), n)
+
+
+def writer_rates(n: int) -> tuple[float, float]:
+    """Small messages a second written to an in-memory MCAP file (zstd chunks of 1 MiB, indexed):
+    the recorder's LeanWriter and the mcap library's Writer."""
+    payload = m.encode(m.Battery(volts=12.0))
+
+    def ours() -> None:
+        w = LeanWriter(io.BytesIO())
+        w.start("", "bench")
+        c = w.register_channel("bench/battery", "msgpack")
+        for i in range(n):
+            w.add_message(c, i, payload, i)
+        w.finish()
+
+    def theirs() -> None:
+        w = mcap.writer.Writer(io.BytesIO())
+        w.start("", "bench")
+        c = w.register_channel("bench/battery", "msgpack", 0)
+        for i in range(n):
+            w.add_message(c, i, payload, i)
+        w.finish()
+    return n / best_of(ours, 1, 3), n / best_of(theirs, 1, 3)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help=QUICK_HELP)
     args = ap.parse_args()
     n_small, n_big, n_rpc, n_flood = (5, 2, 5, 2000) if args.quick else (1000, 50, 1000, 200000)
+    n_decode, n_write = (3, 2000) if args.quick else (300, 200000)
     rows = []
     with router() as endpoint:
         for mode in ("ours", "raw"):
@@ -252,6 +302,16 @@ def main() -> None:
     print(f"| recorder sustained (bus -> MCAP, {n_flood} msgs) | {rate:.0f} | msg/s | {raw_rate:.0f} (receive only) "
           f"| {rate / raw_rate:.2f} | >= 100000 |")
     print(f"| recorder drops | {dropped} | msgs | | | 0 |")
+
+    ours_us, msgpack_us = (t * 1e6 for t in decode_times(n_decode))
+    lean, library = writer_rates(n_write)
+    print()
+    print("| in one process | ours | reference | the reference | ratio |")
+    print("|---|---|---|---|---|")
+    print(f"| decode a 1 MiB DepthImage (us) | {ours_us:.0f} | {msgpack_us:.0f} | msgpack's own path "
+          f"(copies each array) | {ours_us / msgpack_us:.2f} |")
+    print(f"| MCAP writer, {n_write} small messages (msg/s) | {lean:.0f} | {library:.0f} | mcap.writer.Writer "
+          f"| {lean / library:.2f} |")
 
 
 if __name__ == "__main__":
