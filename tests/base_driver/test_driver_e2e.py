@@ -11,7 +11,8 @@ import pytest
 
 from asibot.base_driver import codec
 from asibot.base_driver.codec import Cmd, Deframer
-from asibot.base_driver.driver import SPEED_TOLERANCE, BaseDriver
+from asibot.base_driver.driver import BaseDriver
+from asibot.safety.guarded_base import SPEED_TOLERANCE
 from asibot.base_driver.emulator import ArcosEmulator
 from asibot.base_driver.sip import parse_sip
 from asibot.errors import RpcError
@@ -85,9 +86,9 @@ def test_turning_reports_heading_and_rate(rig):
 def test_speed_beyond_the_driver_limit_is_refused_not_clamped(rig):
     drv, emu, rec = rig
     t0 = time.monotonic()
-    with pytest.raises(CommandRefused, match=r"vx 3 m/s is beyond the driver's limit 0.5 m/s \(--max-vx\)"):
+    with pytest.raises(CommandRefused, match=r"vx 3 m/s is beyond the driver's max speed 0.5 m/s \(--max-vx\)"):
         drv.cmd_vel(3.0, 0.0)
-    with pytest.raises(CommandRefused, match=r"wz -10 rad/s is beyond the driver's limit 1.75 rad/s \(--max-wz\)"):
+    with pytest.raises(CommandRefused, match=r"wz -10 rad/s is beyond the driver's max turn rate 1.75 rad/s \(--max-wz\)"):
         drv.cmd_vel(0.0, -10.0)
     with pytest.raises(CommandRefused, match="vx is nan, not a finite number"):
         drv.cmd_vel(float("nan"), 0.0)

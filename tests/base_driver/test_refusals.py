@@ -33,9 +33,9 @@ def assert_still(odom: Inbox, emulator, n: int = 5) -> None:
 
 
 @pytest.mark.parametrize("payload, says", [
-    ({"vx": 1e300, "wz": 0.0}, "vx 1e+300 m/s is beyond the driver's limit 0.5 m/s (--max-vx)"),
-    ({"vx": -0.6, "wz": 0.0}, "vx -0.6 m/s is beyond the driver's limit 0.5 m/s (--max-vx)"),
-    ({"vx": 0.0, "wz": 2.0}, "wz 2 rad/s is beyond the driver's limit 1.75 rad/s (--max-wz)"),
+    ({"vx": 1e300, "wz": 0.0}, "vx 1e+300 m/s is beyond the driver's max speed 0.5 m/s (--max-vx)"),
+    ({"vx": -0.6, "wz": 0.0}, "vx -0.6 m/s is beyond the driver's max speed 0.5 m/s (--max-vx)"),
+    ({"vx": 0.0, "wz": 2.0}, "wz 2 rad/s is beyond the driver's max turn rate 1.75 rad/s (--max-wz)"),
     ({"vx": math.nan, "wz": 0.0}, "not finite"),
 ])
 def test_a_cmd_vel_beyond_the_limits_is_refused_with_an_event_and_nothing_moves(base, payload, says):

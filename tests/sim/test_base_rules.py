@@ -1,11 +1,12 @@
-"""The base's driver rules and odometry, without physics."""
+"""The sim base's rules (asibot.safety.guarded_base on the sim's clock) and odometry, without physics."""
 
 import math
 import re
 
 import pytest
 
-from asibot.sim.arm import BadCommand, CommandRejected
+from asibot.safety.arming import NotReady
+from asibot.safety.events import CommandRefused
 from asibot.sim.base import ACC_X, MAX_VX, MAX_WZ, SPEED_TOLERANCE, BaseDrive, Odometer
 
 DT = 0.002
@@ -14,52 +15,76 @@ DT = 0.002
 def test_speed_ramps_up_and_is_capped():
     b = BaseDrive()
     five = MAX_VX * (1 + SPEED_TOLERANCE / 2)   # a hair over the max: noise, clamped
-    b.command(five, 0.0, 0.0)
+    b.command(five, 0.0, now=0.0)
     t = 0.0
     for _ in range(50):
         t += DT
         vx, _ = b.step(DT, t)
     assert vx == pytest.approx(ACC_X * 0.1)
-    for _ in range(50):
-        b.command(five, 0.0, t)
-        t += DT
-        vx, _ = b.step(DT, t)
-    for _ in range(500):
-        b.command(five, 0.0, t)
+    for _ in range(550):
+        b.command(five, 0.0, now=t)
         t += DT
         vx, _ = b.step(DT, t)
     assert vx == pytest.approx(MAX_VX)
 
 
 def test_watchdog_stops_the_base_and_notifies():
-    notices = []
-    b = BaseDrive(notify=notices.append)
-    b.command(0.3, 0.2, 0.0)
+    events = []
+    b = BaseDrive(lambda *event: events.append(event))
+    b.command(0.3, 0.2, now=0.0)
     t = 0.0
     for _ in range(int(1.0 / DT)):
         t += DT
         vx, wz = b.step(DT, t)
     assert (vx, wz) == (0.0, 0.0)
-    assert [n.code for n in notices] == ["watchdog"]
+    assert events == [("warning", "watchdog", "No drive command for 200 ms: the base stopped.")]
 
 
-def test_estop_stops_at_once_and_refuses_commands_until_released():
-    b = BaseDrive()
-    b.command(0.5, 0.0, 0.0)
+def test_estop_stops_at_once_ignores_commands_and_only_a_new_stream_moves_after_the_release():
+    events = []
+    b = BaseDrive(lambda *event: events.append(event))
+    b.command(0.5, 0.0, now=0.0)
     for k in range(100):
+        b.command(0.5, 0.0, now=k * DT)
         b.step(DT, k * DT)
-    b.set_estop(True)
+    b.set_estop(True, "a test", "the tester")
     assert (b.vx, b.wz) == (0.0, 0.0)
-    with pytest.raises(CommandRejected, match="emergency stop"):
-        b.command(0.5, 0.0, 0.2)
+    assert b.command(0.5, 0.0, now=0.2) is False and b.step(DT, 0.2) == (0.0, 0.0)
     b.set_estop(False)
-    b.command(0.5, 0.0, 0.2)
+    assert [code for _, code, _ in events] == ["estop", "estop_released", "ready"]
+    assert events[0][2] == ("Emergency stop engaged by the tester (a test): the base is stopped and ignores motion "
+                            "commands until the stop is released.")
+    with pytest.raises(NotReady):          # the stream from before the release goes on: not obeyed
+        b.command(0.5, 0.0, now=0.3)
+    assert b.step(DT, 0.3) == (0.0, 0.0)
+    assert b.command(0.5, 0.0, now=0.8) is True            # a new stream, after a pause
+    assert b.step(DT, 0.8)[0] > 0.0
+
+
+def test_a_change_of_controller_stops_a_moving_base_as_it_brakes_and_arms_it_for_the_new_one():
+    events = []
+    b = BaseDrive(lambda *event: events.append(event))
+    t = 0.0
+    for _ in range(100):
+        b.command(0.5, 0.0, "nav", now=t)
+        t += DT
+        b.step(DT, t)
+    moving = b.vx
+    b.set_controller("joystick")
+    assert [code for _, code, _ in events] == ["controller_lost", "ready"]
+    assert 0.0 < b.step(DT, t)[0] < moving                  # braking, not a jump to zero
+    for _ in range(200):
+        t += DT
+        b.step(DT, t)
+    assert (b.vx, b.wz) == (0.0, 0.0)
+    b.set_controller(None)
+    assert [code for _, code, _ in events] == ["controller_lost", "ready"]    # not moving: nothing to say
 
 
 def test_non_finite_command_is_rejected():
     b = BaseDrive()
-    with pytest.raises(CommandRejected, match="vx is inf, not a finite number"):
-        b.command(math.inf, 0.0, 0.0)
+    with pytest.raises(CommandRefused, match="vx is inf, not a finite number"):
+        b.command(math.inf, 0.0, now=0.0)
 
 
 @pytest.mark.parametrize("vx, wz, says", [
@@ -69,9 +94,9 @@ def test_non_finite_command_is_rejected():
 ])
 def test_speeds_beyond_the_p3at_are_refused_not_clamped(vx, wz, says):
     b = BaseDrive()
-    b.command(0.3, 0.1, 0.0)
-    with pytest.raises(BadCommand, match=re.escape(says)):
-        b.command(vx, wz, 0.1)
+    b.command(0.3, 0.1, now=0.0)
+    with pytest.raises(CommandRefused, match=re.escape(says)):
+        b.command(vx, wz, now=0.1)
     t = 0.0
     for _ in range(50):
         t += DT

@@ -90,8 +90,7 @@ def test_estop_stops_arm_and_base_and_is_latched(apartment):
     sim.set_estop(True, "test")
     sim.step(int(0.3 / sim.dt))
     q, pose = sim.arm_state().positions[0], sim.truth()
-    with pytest.raises(CommandRejected, match="emergency stop"):
-        sim.command_base(0.4, 0.0)
+    assert sim.command_base(0.4, 0.0) is False          # ignored, as every base driver does
     with pytest.raises(CommandRejected, match="emergency stop"):
         sim.command_arm(ArmCommand(mode="velocity", values=[0.3, 0, 0, 0, 0]))
     sim.step(int(1.0 / sim.dt))
@@ -99,7 +98,7 @@ def test_estop_stops_arm_and_base_and_is_latched(apartment):
     assert sim.truth()[0] == pytest.approx(pose[0], abs=1e-3)
     assert [n.code for n in drain(sim)].count("estop") == 1
     sim.set_estop(False)
-    sim.command_base(0.4, 0.0)
+    assert sim.command_base(0.4, 0.0) is True
 
 
 def test_base_at_0_3_m_per_s_for_2_s_travels_0_6_m(apartment):

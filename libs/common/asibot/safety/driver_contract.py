@@ -76,7 +76,7 @@ class Command:
     command, so that its stream does not move the part the moment it takes hold."""
 
     name: str
-    obey: Callable[[Any], None]
+    obey: Callable[[Any], object]
     heard: Callable[[str], None] | None = None
 
     @property
@@ -84,7 +84,7 @@ class Command:
         return KINDS[self.name]
 
 
-def command(name: str, obey: Callable[[Any], None], heard: Callable[[str], None] | None = None) -> Command:
+def command(name: str, obey: Callable[[Any], object], heard: Callable[[str], None] | None = None) -> Command:
     """A `Command` of kind `name` (one of KINDS), checked at once."""
     if name not in KINDS:
         raise ValueError(f"a driver obeys {', '.join(KINDS)} commands, not {name!r}")

@@ -44,6 +44,18 @@ class CommandRefused(ValueError):
         self.reason = reason
 
 
+def estop_said(engaged: bool, reason: str, by: str, meanwhile: str) -> tuple[str, str, str]:
+    """The Event (level, code, text) of an emergency stop engaged or released, in the same words
+    for every driver: "Emergency stop engaged by <who> (<reason>): <meanwhile>." `by` and
+    `reason` may be empty; `meanwhile` says what the robot does until the release ("the arm
+    holds its position and ignores motion commands until it is released")."""
+    who = f" by {by}" if by else ""
+    because = f" ({reason})" if reason else ""
+    if engaged:
+        return "warning", "estop", f"Emergency stop engaged{who}{because}: {meanwhile}."
+    return "info", "estop_released", f"Emergency stop released{who}{because}."
+
+
 def refusal_reason(exc: Exception) -> str:
     """The rate-limiting key of a refused command: a CommandRefused's own, or what the message
     decoder found ("not_finite", "malformed")."""

@@ -28,6 +28,7 @@ import time
 from typing import Callable
 
 from asibot.safety.arming import Arming
+from asibot.safety.events import estop_said
 from asibot.safety.watchdog import Watchdog
 
 EventSink = Callable[[str, str, str], None]      # level, code, text
@@ -141,12 +142,9 @@ class GuardedArm(abc.ABC):
             else:
                 self.arming.disarm(f"the emergency stop was released{who}")
                 ready = self.arming.ready_text("The arm")
-        because = f" ({reason})" if reason else ""
-        if engaged:
-            self.on_event("warning", "estop", f"Emergency stop engaged{who}{because}: the arm holds its position "
-                          "and ignores motion commands until it is released.")
-        else:
-            self.on_event("info", "estop_released", f"Emergency stop released{who}{because}.")
+        self.on_event(*estop_said(engaged, reason, by, "the arm holds its position and ignores motion commands "
+                                                        "until it is released"))
+        if not engaged:
             self.on_event("info", "ready", ready)
 
     def set_controller(self, holder: str | None) -> None:

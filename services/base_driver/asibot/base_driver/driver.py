@@ -1,15 +1,13 @@
 """The Pioneer base driver: the driver contract's base side, without knowing about Zenoh.
 
 One I/O thread owns the line: it connects (and reconnects every second after the cable is
-pulled), reads SIPs, refreshes the setpoint and runs the cmd_vel watchdog (asibot.safety.watchdog). cmd_vel,
-estop and reset_fault arrive from other threads and write at once (lowest latency).
-Safety rules: a lost connection zeroes the setpoint, so a reconnect never resumes an old
-velocity; while the estop is engaged every motion command is ignored; a cmd_vel beyond
---max-vx / --max-wz (or not finite) is refused whole with a CommandRefused, never clamped and
-obeyed: the base keeps its previous command, which the watchdog ends a period later. The
-service obeys only the controller that holds the base (asibot.safety.ownership); after a reconnect,
-an estop release, a motor reset or a change of controller, a cmd_vel stream still running
-from before moves nothing until it pauses for a watchdog period (asibot.safety.arming).
+pulled), reads SIPs, refreshes the setpoint and runs the cmd_vel watchdog. cmd_vel, estop and
+reset_fault arrive from other threads and write at once (lowest latency). The rules every base
+keeps (a cmd_vel beyond --max-vx / --max-wz refused whole, the estop, the watchdog, re-arming
+after a recovery, a change of controller) are `asibot.safety.guarded_base`'s; this driver adds
+the line's own: a lost connection zeroes the setpoint, so a reconnect never resumes an old
+velocity, and a reconnect is a recovery too. The service obeys only the controller that holds
+the base (asibot.safety.ownership).
 """
 
 from __future__ import annotations
@@ -21,7 +19,6 @@ import time
 from typing import Callable
 
 from asibot.base_driver import arcos, codec
-from asibot.safety.arming import Arming
 from asibot.base_driver.arcos import ArcosClient, ArcosError, Identity
 from asibot.base_driver.link import Link, LinkError, open_link
 from asibot.base_driver.notices import EventSink, Notices
@@ -29,9 +26,8 @@ from asibot.base_driver.params import RobotParams
 from asibot.base_driver.sip import is_sip, parse_sip
 from asibot.base_driver.state import BaseState, StateTracker
 from asibot.errors import RpcError
-from asibot.safety.events import CommandRefused, quantity
 from asibot.messages import COMMAND_WATCHDOG_S
-from asibot.safety.watchdog import Watchdog
+from asibot.safety.guarded_base import GuardedBase
 
 log = logging.getLogger(__name__)
 
@@ -42,13 +38,14 @@ RECONNECT_PERIOD = 1.0
 #: (docs/arcos.md "Motion and watchdog").
 DEFAULT_MAX_VX = 0.5
 DEFAULT_MAX_WZ = math.radians(100)
-#: A cmd_vel this fraction over a limit is numerical noise: clamped to the limit, not refused.
-SPEED_TOLERANCE = 1e-3
 StateSink = Callable[[BaseState], None]
 
 
-class BaseDriver:
+class BaseDriver(GuardedBase):
     """ARCOS base behind the driver contract: cmd_vel in, BaseState and events out."""
+
+    limits = "the driver's"
+    hints = {"vx": " (--max-vx)", "wz": " (--max-wz)"}
 
     def __init__(self, port: str, *, on_state: StateSink, on_event: EventSink,
                  baud: int = 9600, params: RobotParams | None = None,
@@ -56,33 +53,23 @@ class BaseDriver:
                  watchdog: float = COMMAND_WATCHDOG_S,
                  link_factory: Callable[[str, int], Link] = open_link,
                  on_write: Callable[[bytes], None] | None = None) -> None:
-        if not (max_vx > 0 and max_wz > 0 and math.isfinite(max_vx) and math.isfinite(max_wz)):
-            raise ValueError("max_vx and max_wz must be positive, finite limits (m/s, rad/s)")
+        super().__init__(max_vx, max_wz, on_event, watchdog=watchdog)
         self.port = port
         self.baud = baud
         self.forced_params = params
-        self.max_vx = max_vx
-        self.max_wz = max_wz
-        self.watchdog = Watchdog(watchdog)
         self._on_state = on_state
         self._on_event = on_event
         self._link_factory = link_factory
         self._on_write = on_write
-        self._lock = threading.RLock()
         self._client: ArcosClient | None = None
         self._tracker: StateTracker | None = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self.arming = Arming()          # a driver starts armed (asibot.safety.arming says why)
-        self._estop = False
-        self._estop_reason = ""
         self._last_sip = 0.0
         self._reported_unreachable = False
         self._notices = Notices(on_event)
         self.last_state: BaseState | None = None
-        self.counters = {"sips": 0, "cmd_vel": 0, "ignored_estop": 0, "refused": 0, "not_ready": 0,
-                         "watchdog_stops": 0, "reconnects": 0, "bad_checksums": 0,
-                         "dropped_bytes": 0}
+        self.counters.update({"sips": 0, "reconnects": 0, "bad_checksums": 0, "dropped_bytes": 0})
 
     # ------------------------------------------------------------ lifecycle
     def start(self) -> None:
@@ -112,94 +99,26 @@ class BaseDriver:
         client = self._client
         return client.identity if client else None
 
-    # ------------------------------------------------------------ commands
+    # ------------------------------------------------------------ GuardedBase
     def cmd_vel(self, vx: float, wz: float, controller: str = "") -> bool:
-        """Obey a velocity command (m/s, rad/s) of `controller` (the holder: the service checked).
-        Returns False when it is ignored (estop, offline).
+        """Obey a velocity command (m/s, rad/s) of `controller`: `GuardedBase.command`. Returns
+        False when it is ignored (the estop, the Pioneer not connected)."""
+        return self.command(vx, wz, controller)
 
-        Raises CommandRefused, and changes nothing, when vx or wz is not finite or beyond the
-        driver's limits (more than SPEED_TOLERANCE over): refused, not clamped; and
-        arming.NotReady when it continues a stream from before the last recovery.
-        """
-        try:
-            self._check(vx, wz)
-        except CommandRefused:
-            with self._lock:
-                self.counters["refused"] += 1
-            raise
-        with self._lock:
-            self.counters["cmd_vel"] += 1
-            may_move = self.arming.admit(controller, time.monotonic())   # noted even when ignored
-            if self._estop:
-                self.counters["ignored_estop"] += 1
-                return False
-            if not may_move:
-                self.counters["not_ready"] += 1
-                raise self.arming.refusal("the base")
-            # Only the tolerated noise is clamped here.
-            cvx = max(-self.max_vx, min(self.max_vx, vx))
-            cwz = max(-self.max_wz, min(self.max_wz, wz))
-            self.watchdog.feed(time.monotonic())
-            client = self._client
-            if client is None:
-                return False
-            return self._guarded(lambda: client.set_velocity(*arcos.to_firmware(cvx, cwz)))
+    def _drive(self, vx: float, wz: float) -> bool:
+        client = self._client
+        if client is None:
+            return False
+        return self._guarded(lambda: client.set_velocity(*arcos.to_firmware(vx, wz)))
 
-    def _check(self, vx: float, wz: float) -> None:
-        for name, v in (("vx", vx), ("wz", wz)):
-            if not math.isfinite(v):
-                raise CommandRefused("not_finite", f"{name} is {quantity(v)}, not a finite number")
-        for name, v, limit, unit, flag in (("vx", vx, self.max_vx, "m/s", "--max-vx"),
-                                           ("wz", wz, self.max_wz, "rad/s", "--max-wz")):
-            if abs(v) > limit * (1.0 + SPEED_TOLERANCE):
-                raise CommandRefused("speed_limit", f"{name} {quantity(v, unit, limit)} is beyond the driver's "
-                                                    f"limit {quantity(limit, unit, abs(v))} ({flag})")
+    def _halt(self) -> None:
+        client = self._client
+        if client is not None:
+            self._guarded(client.emergency_stop)
 
-    def heard(self, controller: str) -> None:
-        """A cmd_vel of a controller that does not hold the base (refused by the service):
-        noted, so that its stream does not move the base the moment it takes over."""
-        with self._lock:
-            self.arming.heard(controller, time.monotonic())
-
-    def set_estop(self, engaged: bool, reason: str = "", by: str = "") -> None:
-        """Latched estop: engaging sends E_STOP at once; only a release re-enables motion."""
-        with self._lock:
-            if engaged == self._estop:
-                return
-            self._estop = engaged
-            self._estop_reason = reason
-            client = self._client
-            who = f" by {by}" if by else ""
-            why = f" ({reason})" if reason else ""
-            if engaged:
-                if client is not None:
-                    self._guarded(client.emergency_stop)
-                self._on_event("error", "estop",
-                               f"Emergency stop engaged{who}{why}: the base is stopped and ignores "
-                               "motion commands until the stop is released.")
-            else:
-                self._on_event("info", "estop_released", f"Emergency stop released{who}{why}.")
-                self._recovered(f"the emergency stop was released{who}")
-
-    def set_controller(self, holder: str | None) -> None:
-        """The controller that holds the base changed (asibot.safety.ownership): stop the base if it
-        was moving, and re-arm for the new holder, if any."""
-        with self._lock:
-            client = self._client
-            if client is not None and client.desired != (0, 0):
-                self._guarded(lambda: client.set_velocity(0, 0))
-                self._on_event("warning", "controller_lost",
-                               "The controller of the base changed or disappeared while the base was moving: "
-                               "the base stopped.")
-            if holder is None:
-                self.arming.disarm("its controller disappeared")
-            else:
-                self._recovered(f"controller {holder!r} took hold of it")
-
-    def _recovered(self, why: str) -> None:
-        """Under the lock: after a recovery only a new stream moves the base; say it is ready."""
-        self.arming.disarm(why)
-        self._on_event("info", "ready", self.arming.ready_text("The base"))
+    def _moving(self) -> bool:
+        client = self._client
+        return client is not None and client.desired != (0, 0)
 
     def reset_fault(self) -> dict:
         """Re-enable the motors (after a stall cut their power or the motor button was off)."""
@@ -207,10 +126,10 @@ class BaseDriver:
             client = self._client
             if client is None:
                 raise RpcError("unavailable", f"The Pioneer on {self.port} is not connected; check the cable.")
-            if self._estop:
+            if self.estop:
                 raise RpcError("estop", "The emergency stop is engaged; release it before resetting faults.")
             self._guarded(lambda: client.enable_motors(True))
-            self._recovered("its motors were re-enabled")
+            self.recovered("its motors were re-enabled")
         return {"motors_enabled_requested": True}
 
     # ------------------------------------------------------------ state
@@ -229,8 +148,7 @@ class BaseDriver:
     def mode(self) -> str:
         if self.fault():
             return "fault"
-        client = self._client
-        return "velocity" if client is not None and client.desired != (0, 0) else "idle"
+        return "velocity" if self._moving() else "idle"
 
     def status(self) -> dict:
         ident = self.identity
@@ -242,7 +160,7 @@ class BaseDriver:
             "params": params.subclass if params else "",
             "names": [], "lower": [], "upper": [], "max_velocity": [],
             "max_vx": self.max_vx, "max_wz": self.max_wz,
-            "mode": self.mode(), "fault": self.fault(), "estop": self._estop,
+            "mode": self.mode(), "fault": self.fault(), "estop": self.estop,
             "counters": dict(self.counters),
         }
 
@@ -284,8 +202,8 @@ class BaseDriver:
             self.watchdog.last = -math.inf      # nothing heard on this line yet
             self._notices.reset()
             self._reported_unreachable = False
-            if self._estop:
-                self._guarded(client.emergency_stop)
+            if self.estop:
+                self._halt()
             # The line is (back) up: a stream sent while it was down must not drive on.
             self.arming.disarm(f"the Pioneer {'re' if self.counters['reconnects'] else ''}connected on {self.port}")
         log.info("connected to %s (%s %s) on %s, params %s", ident.name, ident.klass,
@@ -326,11 +244,8 @@ class BaseDriver:
         now = time.monotonic()
         if now - self._last_sip > SIP_TIMEOUT:
             raise ArcosError(f"no SIP for {SIP_TIMEOUT:g} s")
+        self.watch(now)
         with self._lock:
-            if self.watchdog.fires(now, client.desired != (0, 0)):
-                self.counters["watchdog_stops"] += 1
-                client.set_velocity(0, 0)
-                self._on_event("warning", "watchdog", self.watchdog.says("cmd_vel", "the base stopped"))
             client.refresh()
 
     def _on_sip(self, payload: bytes) -> None:

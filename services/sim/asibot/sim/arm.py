@@ -15,7 +15,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from asibot.safety.events import CommandRefused, quantity
+from asibot.safety.events import CommandRefused, estop_said, quantity
 from asibot.messages import ArmCommand
 from asibot.safety.watchdog import Watchdog
 
@@ -160,17 +160,15 @@ class JointTracker:
                 raise BadCommand("speed_limit", f"joint {self.limits.names[j]} {what} {quantity(v, 'rad/s', m)} "
                                                 f"is beyond its max speed {quantity(m, 'rad/s', abs(v))}")
 
-    def set_estop(self, engaged: bool, reason: str = "", stopped: str = "the arm is holding its position",
+    def set_estop(self, engaged: bool, reason: str = "",
+                  stopped: str = "the arm holds its position and ignores motion commands until it is released",
                   by: str = "") -> None:
-        """Latch or release the emergency stop; engaging stops the arm where it is. `by` says who."""
-        who = f" by {by}" if by else ""
+        """Latch or release the emergency stop; engaging stops the arm where it is. `by` says
+        who; `stopped`, what the robot does until the release (asibot.safety.events.estop_said)."""
         if engaged and not self.estop:
             self.hold()
-            self.notify(Notice("warning", "estop",
-                               f"Emergency stop engaged{who}{': ' + reason if reason else ''}; {stopped}."))
-        elif not engaged and self.estop:
-            self.notify(Notice("info", "estop_released",
-                               f"Emergency stop released{who}{': ' + reason if reason else ''}."))
+        if engaged != self.estop:
+            self.notify(Notice(*estop_said(engaged, reason, by, stopped)))
         self.estop = engaged
 
     def hold(self) -> None:

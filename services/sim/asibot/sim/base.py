@@ -1,5 +1,6 @@
-"""The mobile base's driver rules (watchdog, estop, speed and acceleration limits) and its
-odometry, independent of MuJoCo and of the bus.
+"""The sim's mobile base: the rules every base keeps (asibot.safety.guarded_base: limits,
+estop, watchdog, re-arming, a change of controller), on the sim's clock, and a ramp to the
+commanded velocity; its odometry. Independent of MuJoCo and of the bus.
 
 Numbers (docs/arcos.md, "P3-AT parameters"): P3-AT MaxVelocity 1.2 m/s and MaxRVelocity
 300 deg/s (ARIA p3at-sh.p). ARIA leaves accelerations to the firmware; we use the p2os
@@ -16,67 +17,55 @@ from typing import Callable
 
 import numpy as np
 
-from asibot.safety.events import quantity
-from asibot.safety.watchdog import Watchdog
-from asibot.sim.arm import BadCommand, CommandRejected, Notice
+from asibot.safety.guarded_base import SPEED_TOLERANCE, EventSink, GuardedBase
+
+__all__ = ["ACC_WZ", "ACC_X", "MAX_VX", "MAX_WZ", "SPEED_TOLERANCE", "BaseDrive", "Odometer"]
 
 MAX_VX = 1.2
 MAX_WZ = math.radians(300.0)
 ACC_X = 2.5
 ACC_WZ = 3.2
-SPEED_TOLERANCE = 1e-3
-"""A command this fraction over a max speed is numerical noise: clamped, not refused."""
 
 
-@dataclass
-class BaseDrive:
-    """Turns Twist commands into a ramped body velocity, stopping on watchdog and estop."""
+def _quiet(level: str, code: str, text: str) -> None:
+    """Events nobody listens to (a base made alone, in a test)."""
 
-    notify: Callable[[Notice], None] = lambda n: None
-    estop: bool = False
-    vx: float = 0.0
-    wz: float = 0.0
-    _goal: tuple[float, float] = (0.0, 0.0)
-    watchdog: Watchdog = field(default_factory=Watchdog)   # fed by every command
 
-    def command(self, vx: float, wz: float, now: float) -> None:
-        self.check(vx, wz)
-        if self.estop:
-            raise CommandRejected("the emergency stop is engaged; release it before driving")
-        self._goal = (float(np.clip(vx, -MAX_VX, MAX_VX)), float(np.clip(wz, -MAX_WZ, MAX_WZ)))
-        self.watchdog.feed(now)
+class BaseDrive(GuardedBase):
+    """Turns Twist commands into a ramped body velocity (`step`, each physics step), stopping
+    on watchdog and estop. Its clock is the sim's (`clock`, s), as every time it is given."""
 
-    def check(self, vx: float, wz: float) -> None:
-        """BadCommand when vx or wz is not finite or beyond the P3-AT's max speeds."""
-        for name, v in (("vx", vx), ("wz", wz)):
-            if not math.isfinite(v):
-                raise BadCommand("not_finite", f"{name} is {quantity(v)}, not a finite number")
-        for name, v, limit, unit, what in (("vx", vx, MAX_VX, "m/s", "speed"), ("wz", wz, MAX_WZ, "rad/s", "turn rate")):
-            if abs(v) > limit * (1.0 + SPEED_TOLERANCE):
-                raise BadCommand("speed_limit", f"{name} {quantity(v, unit, limit)} is beyond the P3-AT's max {what} "
-                                                f"{quantity(limit, unit, abs(v))}")
+    limits = "the P3-AT's"
 
-    def set_estop(self, engaged: bool) -> None:
-        """Latch or release; engaging stops at once. (The robot reports the estop once, not here.)"""
-        if engaged:
-            self.stop()
-        self.estop = engaged
+    def __init__(self, on_event: EventSink = _quiet, clock: Callable[[], float] = lambda: 0.0) -> None:
+        super().__init__(MAX_VX, MAX_WZ, on_event, clock=clock)
+        self.vx = self.wz = 0.0
+        self._goal = (0.0, 0.0)
+
+    def _drive(self, vx: float, wz: float) -> bool:
+        self._goal = (vx, wz)
+        return True
+
+    def _halt(self) -> None:
+        self.stop()
+
+    def _moving(self) -> bool:
+        return self._goal != (0.0, 0.0)      # braking to a stop is not moving on
 
     def stop(self) -> None:
-        """Immediate stop (estop): no ramp."""
-        self._goal = (0.0, 0.0)
-        self.vx = self.wz = 0.0
+        """Immediate stop (the estop, a reset of the world): no ramp."""
+        with self._lock:
+            self._goal = (0.0, 0.0)
+            self.vx = self.wz = 0.0
 
     def step(self, dt: float, now: float) -> tuple[float, float]:
         """Advance the ramp by dt; returns the body velocity (vx m/s, wz rad/s) to apply."""
-        if self.watchdog.fires(now):
-            if self._goal != (0.0, 0.0):
-                self.notify(Notice("warning", "watchdog", self.watchdog.says("drive command", "the base stopped")))
-            self._goal = (0.0, 0.0)
-        gx, gw = self._goal
-        self.vx += float(np.clip(gx - self.vx, -ACC_X * dt, ACC_X * dt))
-        self.wz += float(np.clip(gw - self.wz, -ACC_WZ * dt, ACC_WZ * dt))
-        return self.vx, self.wz
+        self.watch(now)
+        with self._lock:
+            gx, gw = self._goal
+            self.vx += float(np.clip(gx - self.vx, -ACC_X * dt, ACC_X * dt))
+            self.wz += float(np.clip(gw - self.wz, -ACC_WZ * dt, ACC_WZ * dt))
+            return self.vx, self.wz
 
 
 @dataclass

@@ -65,13 +65,15 @@ class Simulation:
                                      self.robot.max_velocity)
         self.arm = JointTracker(self.limits, np.asarray(self.robot.home, float), notify=self.notices.put)
         self.gripper_goal = self.scene.gripper.max_opening
-        self.base = BaseDrive(notify=self.notices.put) if self.scene.base else None
+        self.base = BaseDrive(self._notice, clock=lambda: self.time) if self.scene.base else None
         self.odom = Odometer(noise=odom_noise, seed=seed) if self.scene.base else None
         self.battery = sensors.Battery()
         self.places = load_places(self.world)
         self.estop = False
         # Re-arming of each part after a recovery; a sim starts armed, as a driver does.
-        self.arming = {"arm": Arming(), "base": Arming()}
+        self.arming = {"arm": Arming()}
+        if self.base is not None:
+            self.arming["base"] = self.base.arming
         self._odom_acc = 0.0
         self._odom_sum = np.zeros(2)
         self._steps = 0
@@ -127,15 +129,13 @@ class Simulation:
                 raise CommandRejected("the emergency stop is engaged; release it before using the gripper")
             self.gripper_goal = float(np.clip(opening, 0.0, self.scene.gripper.max_opening))
 
-    def command_base(self, vx: float, wz: float, controller: str = "") -> None:
-        """As command_arm, for a Twist of `controller`."""
+    def command_base(self, vx: float, wz: float, controller: str = "") -> bool:
+        """As command_arm, for a Twist of `controller` (asibot.safety.guarded_base's rules);
+        False when it is ignored (the estop)."""
         with self.lock:
             if self.base is None:
                 raise BadCommand("no_base", f"{self.robot.robot_id} has no mobile base")
-            if not self.arming["base"].admit(controller, self.time) and not self.estop:
-                self.base.check(vx, wz)
-                raise self.arming["base"].refusal("the base")
-            self.base.command(vx, wz, self.time)
+            return self.base.command(vx, wz, controller)
 
     def heard(self, part: str, controller: str) -> None:
         """A command of a controller that does not hold `part` ("arm", "base"; refused by the
@@ -147,11 +147,12 @@ class Simulation:
         with self.lock:
             released = self.estop and not engaged
             self.estop = engaged
-            stopped = "the base stopped and the arm is holding its position" if self.base else \
-                "the arm is holding its position"
+            stopped = ("the base is stopped, the arm holds its position, and both ignore motion commands until "
+                       "the stop is released") if self.base else \
+                "the arm holds its position and ignores motion commands until it is released"
             self.arm.set_estop(engaged, reason, stopped, by)
             if self.base:
-                self.base.set_estop(engaged)
+                self.base.latch(engaged)           # the arm's event says it for both
             if released:
                 for part in self._parts():
                     self._recovered(part, "the emergency stop was released" + (f" by {by}" if by else ""))
@@ -165,10 +166,9 @@ class Simulation:
                 self.arm.hold()
                 self.notices.put(Notice("warning", "controller_lost",
                                         "The controller of the arm changed or disappeared; the arm stopped."))
-            if part == "base" and self.base is not None and (self.base.vx, self.base.wz) != (0.0, 0.0):
-                self.base.stop()
-                self.notices.put(Notice("warning", "controller_lost",
-                                        "The controller of the base changed or disappeared; the base stopped."))
+            if part == "base" and self.base is not None:
+                self.base.set_controller(holder)
+                return
             if holder is None:
                 self.arming[part].disarm("its controller disappeared")
             else:
@@ -178,6 +178,9 @@ class Simulation:
         with self.lock:
             self.arm.reset_fault(self.data.qpos[self.scene.arm_qpos])
             self._recovered("arm", "the fault was reset")
+
+    def _notice(self, level: str, code: str, text: str) -> None:
+        self.notices.put(Notice(level, code, text))
 
     def _parts(self) -> tuple[str, ...]:
         return ("arm", "base") if self.base else ("arm",)
