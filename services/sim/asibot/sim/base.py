@@ -62,9 +62,9 @@ class BaseDrive(GuardedBase):
         """Advance the ramp by dt; returns the body velocity (vx m/s, wz rad/s) to apply."""
         self.watch(now)
         with self._lock:
-            gx, gw = self._goal
-            self.vx += float(np.clip(gx - self.vx, -ACC_X * dt, ACC_X * dt))
-            self.wz += float(np.clip(gw - self.wz, -ACC_WZ * dt, ACC_WZ * dt))
+            (gx, gw), ax, aw = self._goal, ACC_X * dt, ACC_WZ * dt
+            self.vx += min(max(gx - self.vx, -ax), ax)
+            self.wz += min(max(gw - self.wz, -aw), aw)
             return self.vx, self.wz
 
 

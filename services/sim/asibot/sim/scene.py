@@ -7,9 +7,10 @@ compensation) is added here in code. Geometry is never copied by hand.
 """
 
 from __future__ import annotations
-from importlib import resources
 
+import math
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 
 import mujoco
@@ -40,10 +41,17 @@ class Gripper:
     opened: np.ndarray        # joint values at the maximum opening
     max_opening: float        # m
     geoms: list[set[int]]     # collision geoms of each finger
+    _last: tuple[float, np.ndarray] = field(default=(math.nan, np.zeros(0)), init=False, repr=False)
 
     def joint_values(self, opening: float) -> np.ndarray:
-        f = float(np.clip(opening / self.max_opening, 0.0, 1.0))
-        return self.closed + f * (self.opened - self.closed)
+        """The finger joints' values at `opening` (m), asked every physics step: the last answer
+        is kept, as the opening changes only when the gripper is commanded."""
+        if opening != self._last[0]:
+            f = min(max(opening / self.max_opening, 0.0), 1.0)
+            values = self.closed + f * (self.opened - self.closed)
+            values.flags.writeable = False                 # shared by every step that asks
+            self._last = (opening, values)
+        return self._last[1]
 
     def opening(self, qpos: np.ndarray) -> float:
         span = self.opened - self.closed

@@ -58,6 +58,7 @@ class Simulation:
             raise ValueError(f"world {self.world!r} hosts {WORLDS[self.world]!r}, not {robot_id!r}")
         self.scene: Scene = build(self.world, self.robot)
         self.model = self.scene.model
+        self._dt = float(self.model.opt.timestep)      # read 500 times a second: the model's never changes
         self.data = mujoco.MjData(self.model)
         self.lock = threading.RLock()
         self.notices: "queue.SimpleQueue[Notice]" = queue.SimpleQueue()
@@ -75,14 +76,14 @@ class Simulation:
         if self.base is not None:
             self.arming["base"] = self.base.arming
         self._odom_acc = 0.0
-        self._odom_sum = np.zeros(2)
+        self._odom_vx = self._odom_wz = 0.0       # sums over the odometry period
         self._steps = 0
         self.reset_world()
 
     # ------------------------------------------------------------------ setup
     @property
     def dt(self) -> float:
-        return float(self.model.opt.timestep)
+        return self._dt
 
     @property
     def time(self) -> float:
@@ -254,19 +255,19 @@ class Simulation:
 
     def _integrate_odometry(self, dt: float, commanded_vx: float) -> None:
         b, odom = self._mobile_base(), self._odometer()
-        qv = self.data.qvel[b.dof]
-        yaw = self.data.qpos[b.qpos[2]]
-        self._odom_sum += (qv[0] * math.cos(yaw) + qv[1] * math.sin(yaw), qv[2])
+        qvel, dof = self.data.qvel, b.dof
+        yaw = float(self.data.qpos[b.qpos[2]])
+        self._odom_vx += float(qvel[dof[0]]) * math.cos(yaw) + float(qvel[dof[1]]) * math.sin(yaw)
+        self._odom_wz += float(qvel[dof[2]])
         self._odom_acc += dt
         if self._odom_acc >= ODOM_PERIOD_S - 1e-9:
-            vx, wz = self._odom_sum * dt / self._odom_acc
-            odom.update(float(vx), float(wz), self._odom_acc)
+            vx, wz = self._odom_vx * dt / self._odom_acc, self._odom_wz * dt / self._odom_acc
+            odom.update(vx, wz, self._odom_acc)
             x, y, _ = self.truth()
             charging = any(math.hypot(x - px, y - py) < CHARGE_RADIUS_M
                            for name, (px, py, _) in self.places.items() if "charg" in name)
             self.battery.update(self._odom_acc, abs(commanded_vx) / 1.2, charging and abs(vx) < 1e-3)
-            self._odom_acc = 0.0
-            self._odom_sum[:] = 0.0
+            self._odom_acc = self._odom_vx = self._odom_wz = 0.0
 
     # ------------------------------------------------------------------ grasping
     def _touching(self) -> dict[int, set[int]]:
