@@ -52,6 +52,46 @@ def test_movj_references_then_done_and_busy_meanwhile():
     assert c.wait(0.0)
 
 
+def test_the_end_of_a_motion_is_sent_again_until_the_arm_is_there():
+    """One lost message must not leave the arm on a set-point from the middle of the motion
+    (a jog step ended 1.1 deg past its target in CI): the end goes again every RESEND_S."""
+    from asibot.kinematics.controller import RESEND_S, SETTLE_S
+    c = ready()
+    T = c.movj(Q0 + 0.2, 0.0)
+    end = c.tick(T + 0.001)
+    assert np.allclose(end.positions, Q0 + 0.2) and np.allclose(end.velocities, 0)
+    at = lambda k: T + 0.001 + k * (RESEND_S + 1e-6)              # noqa: E731 (a hair past each)
+    assert c.tick(at(0.5)) is None                              # not at every tick
+    assert c.tick(at(1)) == end
+    assert c.tick(at(1.5)) is None
+    assert c.tick(at(2)) == end
+    c.on_arm_state(Q0 + 0.2 - np.radians(0.3), "")             # there, within SETTLED_WITHIN
+    assert all(c.tick(at(k)) is None for k in range(3, 40))
+    # an arm that never gets there (pushing on something): sent again for SETTLE_S, no longer
+    c.movj(Q0, 10.0)
+    c.tick(10.0 + T + 0.001)
+    sent = [t for t in np.arange(10.0 + T + 0.05, 10.0 + T + SETTLE_S + 1.0, 0.01) if c.tick(float(t)) is not None]
+    assert sent and max(sent) < 10.0 + T + 0.001 + SETTLE_S
+    assert SETTLE_S / (RESEND_S + 0.01) - 1 <= len(sent) <= SETTLE_S / RESEND_S    # ticks 10 ms apart
+
+
+@pytest.mark.parametrize("what", ["estop", "stop", "movj"])
+def test_an_old_end_is_not_sent_again_after_an_estop_a_stop_or_a_new_motion(what):
+    c = ready()
+    T = c.movj(Q0 + 0.2, 0.0)
+    c.tick(T + 0.001)
+    if what == "estop":
+        c.on_estop(True, "")
+    elif what == "stop":
+        c.stop()
+    else:
+        c.movj(Q0 - 0.1, T + 0.01)
+    sent = [c.tick(T + 0.02 + k * 0.01) for k in range(60)]
+    # the stop holds where the arm is measured (Q0), and a new motion starts from there
+    assert what == "estop" or np.allclose(sent[0].positions, Q0, atol=1e-3)
+    assert not any(r is not None and np.allclose(r.positions, Q0 + 0.2) for r in sent)
+
+
 def test_wait_ends_when_the_arm_arrives_or_a_while_after_the_plan_or_at_a_stop(monkeypatch):
     import threading
     import time

@@ -33,6 +33,11 @@ where the arm happens to be; the target lives and dies with its motion: its end,
 estop, a fault or the driver's loss forget it, and a motion of another verb has none. The next
 step checks itself first (`check_joint_limits`, `check_line`) and only then stops the running
 one, so that a step refused changes nothing.
+
+Where a motion ends (its last point, or the hold after a stop) is sent again every RESEND_S
+until the arm is measured there or SETTLE_S has passed: commands go out without waiting for
+the network (they drop rather than queue up late), and the driver keeps the last set-point it
+got, so one lost message would leave the arm on a point from the middle of the motion.
 """
 
 from __future__ import annotations
@@ -69,6 +74,8 @@ SETTLED_WITHIN = np.radians(0.5)
 #: s: `wait` waits at most this long after a plan's end for the arm to catch up (an arm pushing
 #: on something never does; the motion is over all the same).
 SETTLE_S = 3.0
+#: s: how often the end of a motion is sent again while the arm is not there (see the module).
+RESEND_S = 0.1
 
 
 class Model(Protocol):
@@ -134,6 +141,9 @@ class Controller:
         self.watchdog = Watchdog()     # a streamed motion lapses when its requests stop
         self._last_tick: float | None = None
         self._send_hold = False
+        # The tick time of the next resend of _hold, and the last (see RESEND_S); None: no resend.
+        self._resend_at: float | None = None
+        self._resend_until = 0.0
         # The end of the last planned motion while the arm catches up with it (see wait).
         self._settle: np.ndarray | None = None
         self._settle_by = 0.0
@@ -365,14 +375,31 @@ class Controller:
                 if t >= self._plan.duration:
                     q = self._plan.q_at(self._plan.duration)
                     self._finish(q)
-                    return Reference(q.tolist(), [0.0] * self.n)
+                    return self._ended(q, now)
                 return Reference(self._plan.q_at(t).tolist(), self._plan.qdot_at(t).tolist())
             if self.state in STREAMS:
                 return self._stream_tick(now)
             if self._send_hold and self._hold is not None:
                 self._send_hold = False
-                return Reference(self._hold.tolist(), [0.0] * self.n)
+                return self._ended(self._hold, now)
+            return self._resend(now)
+
+    def _ended(self, hold: np.ndarray, now: float) -> Reference:
+        """The reference where a motion ended (_hold), sent now and again until the arm is there."""
+        self._resend_at, self._resend_until = now + RESEND_S, now + SETTLE_S
+        return Reference(hold.tolist(), [0.0] * self.n)
+
+    def _resend(self, now: float) -> Reference | None:
+        if self._resend_at is None or self._hold is None:
             return None
+        there = self.q is not None and np.max(np.abs(self.q - self._hold)) <= SETTLED_WITHIN
+        if there or self.estop or self.fault or now >= self._resend_until:
+            self._resend_at = None       # the driver ignores or refuses it under the estop or a fault
+            return None
+        if now < self._resend_at:
+            return None
+        self._resend_at = now + RESEND_S
+        return Reference(self._hold.tolist(), [0.0] * self.n)
 
     def _stream_tick(self, now: float) -> Reference | None:
         if self.watchdog.silent(now):
@@ -437,6 +464,7 @@ class Controller:
         """Something happened that a motion being planned must not outlive (see start)."""
         self._epoch += 1
         self._interrupt = what
+        self._resend_at = None         # an old end is not sent again over what comes next
 
     def _cancel(self, why: RpcError | None, what: str) -> None:
         """Abort the running motion (if any) and the motions being planned."""
