@@ -2,6 +2,7 @@
 
 import argparse
 import math
+import time
 
 import numpy as np
 import pytest
@@ -187,24 +188,49 @@ def test_a_silent_camera_is_announced_once_and_its_return_too(memory_bus):
     try:
         h.info("front"), h.info("back")
         scene = [wall_x(2.0), wall_x(-2.0)]
-        frame_at("back", 100.0)
-        frame_at("front", 100.0)
-        frame_at("front", 100.4)
-        frame_at("front", 100.8)                  # the back camera's frame is 0.8 s old now
+        frame_at("back", 100.0)                   # the first frames, then a second with none, as
+        frame_at("front", 100.0)                  # the sim's renderers start: not a word yet
+        clock.t = 101.0
+        time.sleep(3 * perception.WATCH_PERIOD_S)
+        assert not len(h.events)
+        frame_at("back", 106.0)
+        frame_at("front", 106.0)
+        frame_at("front", 106.4)
+        frame_at("front", 106.8)                  # the back camera's frame is 0.8 s old now
         wait_until(lambda: len(h.events), 5, message="the silent back camera was not announced")
-        clock.t = 110.0                           # now the front camera is silent too
+        clock.t = 116.0                           # now the front camera is silent too
         wait_until(lambda: len(h.events) == 2, 5, message="the silent front camera was not announced")
-        frame_at("front", 110.1)
+        frame_at("front", 116.1)
         wait_until(lambda: len(h.events) == 3, 5)
         assert [(e.level, e.code, e.text) for e in h.events.all()] == [
-            ("warning", "camera_silent", "The back camera has sent no depth image for 0.5 s: obstacles it "
+            ("warning", "camera_silent", "The back camera has sent no depth image for 0.5 s. Obstacles it "
                                          "watches are not seen; the scan covers only the front camera."),
-            ("warning", "camera_silent", "The front camera has sent no depth image for 0.5 s: obstacles it "
+            ("warning", "camera_silent", "The front camera has sent no depth image for 0.5 s. Obstacles it "
                                          "watches are not seen; no scan is published."),
             ("info", "camera_working", "The front camera works again."),
         ]
         behind = h.scans.last().ranges[np.r_[0:20, 700:720]]
         assert np.isnan(behind).all()             # the silent back camera's sector is unknown, not free
+    finally:
+        h.close()
+
+
+def test_a_camera_that_never_sends_a_frame_is_announced_after_the_start_up_grace(memory_bus):
+    clock = Clock()
+    h = Harness(clock)
+    try:
+        h.info("front"), h.info("back")
+        clock.t += perception.STARTUP_GRACE_S - 1
+        time.sleep(3 * perception.WATCH_PERIOD_S)
+        assert not len(h.events)                  # the sim may still be starting
+        clock.t += 2
+        wait_until(lambda: len(h.events) == 2, 5, message="the cameras' silence was not announced")
+        assert [e.text for e in h.events.all()] == [
+            "The back camera has sent no depth image since perception started 6 s ago (is the sim or the camera's "
+            "driver running?). Obstacles it watches are not seen; no scan is published.",
+            "The front camera has sent no depth image since perception started 6 s ago (is the sim or the camera's "
+            "driver running?). Obstacles it watches are not seen; no scan is published.",
+        ]
     finally:
         h.close()
 

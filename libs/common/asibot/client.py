@@ -16,6 +16,7 @@ from asibot.safety import estop
 from asibot import keys
 from asibot.bus import Bus
 from asibot.errors import RpcError, Timeout
+from asibot.messages import LISTEN_SECONDS
 from asibot.safety.estop import who
 from asibot.safety.identity import Identity
 
@@ -319,7 +320,7 @@ class VoiceClient(_ServiceClient):
         when `confirm` is given (kept in the user's data folder)."""
         return self._call("settings", confirm=confirm)["confirm"]
 
-    def learn(self, word: str, *, source: str, seconds: float = 8.0) -> dict:
+    def learn(self, word: str, *, source: str, seconds: float = LISTEN_SECONDS) -> dict:
         """Learn how the user says `word` from the next thing said on the live audio `source`
         (a page's microphone: "web-<page id>") within `seconds`: {"phrase", "phones", "sayings" kept,
         "matched" (would the recogniser have heard it already), "heard", "dropped", "seconds"}.

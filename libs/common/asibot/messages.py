@@ -709,6 +709,11 @@ class AudioChunk(Message):
     channels: int = 1
 
 
+#: How long the voice service's `learn` listens to a live source for the word, s: by default,
+#: and the shortest and longest a caller may ask for (a phrase said after a moment's thought).
+LISTEN_SECONDS, MIN_LISTEN_SECONDS, MAX_LISTEN_SECONDS = 8.0, 1.0, 20.0
+
+
 class VoiceHeard(Message):
     """One utterance the voice service cut from the audio of `source`, and what it did.
 

@@ -58,7 +58,6 @@ class BaseDriver(GuardedBase):
         self.baud = baud
         self.forced_params = params
         self._on_state = on_state
-        self._on_event = on_event
         self._link_factory = link_factory
         self._on_write = on_write
         self._client: ArcosClient | None = None
@@ -208,16 +207,16 @@ class BaseDriver(GuardedBase):
             self.arming.disarm(f"the Pioneer {'re' if self.counters['reconnects'] else ''}connected on {self.port}")
         log.info("connected to %s (%s %s) on %s, params %s", ident.name, ident.klass,
                  ident.subclass, self.port, params.subclass)
-        self._on_event("info", "connected",
+        self.on_event("info", "connected",
                        f"Connected to the Pioneer {ident.name!r} ({ident.subclass}) on {self.port}.")
-        self._on_event("info", "ready", self.arming.ready_text("The base"))
+        self.on_event("info", "ready", self.arming.ready_text("The base"))
         return True
 
     def _unreachable(self, reason: str) -> None:
         if not self._reported_unreachable:
             self._reported_unreachable = True
             log.warning("cannot reach the Pioneer on %s: %s", self.port, reason)
-            self._on_event("error", "disconnected",
+            self.on_event("error", "disconnected",
                            f"Cannot reach the Pioneer on {self.port} ({reason}); check the cable and "
                            f"the port; retrying every {RECONNECT_PERIOD:g} s.")
 
@@ -229,7 +228,7 @@ class BaseDriver(GuardedBase):
             self.counters["reconnects"] += 1
         self._reported_unreachable = True
         log.warning("lost the Pioneer on %s: %s", self.port, reason)
-        self._on_event("error", "disconnected",
+        self.on_event("error", "disconnected",
                        f"Lost the Pioneer on {self.port} ({reason}). Its own watchdog stops it; "
                        "reconnecting, and it will not resume the old velocity.")
 

@@ -55,7 +55,8 @@ log = logging.getLogger("asibot.perception")
 NAME = "perception"
 
 STARTUP_GRACE_S = 5.0
-"""A camera that never sent a frame is reported silent only after this long (start-up order)."""
+"""A camera is reported silent only this long after its first frame, or after the service's
+start if none came: the sim's first frames come a second apart while it starts its renderers."""
 WATCH_PERIOD_S = 0.25
 RGB_STALE_S = 2.0
 """`find` refuses an RGB image older than this: the robot may have moved since."""
@@ -109,6 +110,7 @@ class PerceptionService(Service):
         self._odom: tuple[m.Odometry, float] | None = None
         self._rgb: tuple[m.RgbImage, float] | None = None
         self._silent: set[str] = set()
+        self._first_frame: dict[str, float] = {}   # when _watch first saw each camera's frame
         self.scans = 0
         self.events_sent = 0
         self._pub_scan = bus.publisher(keys.scan(robot), m.LaserScan)
@@ -215,16 +217,20 @@ class PerceptionService(Service):
         """Say once when a camera falls silent, and once when it is back."""
         while not self._stop.wait(WATCH_PERIOD_S):
             now = self.clock()
-            silent = set(self.assembler.silent(now))
-            if now - self.started < STARTUP_GRACE_S:   # start-up order: wait for the sim or driver
-                silent &= set(self.assembler.heard())
+            for name in self.assembler.heard():
+                self._first_frame.setdefault(name, now)
+            silent = {name for name in self.assembler.silent(now)
+                      if now - self._first_frame.get(name, self.started) >= STARTUP_GRACE_S}
             for name in sorted(silent - self._silent):
                 watching = [c for c in self.opt.depth_cameras if c not in silent]
                 rest = (f"the scan covers only the {' and '.join(watching)} camera{'s' if len(watching) > 1 else ''}"
                         if watching else "no scan is published")
+                since = (f"for {self.opt.freshness:g} s." if name in self._first_frame else
+                         f"since perception started {now - self.started:.0f} s ago (is the sim or the camera's "
+                         "driver running?).")
                 self._event(m.Event(level="warning", code="camera_silent",
-                                    text=f"The {name} camera has sent no depth image for "
-                                         f"{self.opt.freshness:g} s: obstacles it watches are not seen; {rest}."))
+                                    text=f"The {name} camera has sent no depth image {since} Obstacles it watches "
+                                         f"are not seen; {rest}."))
             for name in sorted(self._silent - silent):
                 self._event(m.Event(level="info", code="camera_working", text=f"The {name} camera works again."))
             self._silent = silent

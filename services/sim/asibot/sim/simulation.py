@@ -187,7 +187,11 @@ class Simulation:
         return ("arm", "base") if self.base else ("arm",)
 
     def _recovered(self, part: str, why: str) -> None:
-        """Under the lock: after a recovery only a new stream moves `part`; say it is ready."""
+        """Under the lock: after a recovery only a new stream moves `part`; say it is ready
+        (the base's GuardedBase says it in its own words)."""
+        if part == "base" and self.base is not None:
+            self.base.recovered(why)
+            return
         self.arming[part].disarm(why)
         self.notices.put(Notice("info", "ready", self.arming[part].ready_text(f"The {part}")))
 

@@ -40,7 +40,8 @@ from asibot.client import TasksClient
 from asibot.errors import RpcError, Unavailable
 from asibot.safety.estop import who
 from asibot.safety.identity import Identity
-from asibot.messages import AudioChunk, Event, VoiceHeard
+from asibot.messages import (AudioChunk, Event, LISTEN_SECONDS, MAX_LISTEN_SECONDS, MIN_LISTEN_SECONDS,
+                             VoiceHeard)
 from asibot.verbs import Blob, Field, Flag, Number, OneOf, Text, Texts, Verb, Whole
 from asibot.voice.audio import MAX_RATE, MIN_RATE, SAMPLE_TYPES, AudioFormat, decode, to_16k
 from asibot.voice.commands import STOP, Commands, Outcome, Stopped, Transcript
@@ -67,8 +68,6 @@ WAITING_FOR_TASKS = "Waiting for the Task Creator (the web service) to list the 
 MAX_WAITING = 16
 #: A recording sent to learn a word from, s at most (the word, with quiet around it).
 MAX_RECORDING = 10.0
-#: How long `learn` listens to a live source for the word by default, and at most, s.
-LISTEN_SECONDS, MAX_LISTEN_SECONDS = 8.0, 20.0
 #: Longest word or phrase a request may name, characters (a phrase has at most 12 words).
 MAX_WORD_CHARS = 200
 
@@ -90,7 +89,7 @@ VERBS = {
         "sample": Field(OneOf(tuple(SAMPLE_TYPES)), default="int16"),
         "channels": Field(Whole(1, 2), default=1),
         "source": Field(Text("an audio source name"), also="or absent to learn from a recording"),
-        "seconds": Field(Number(1.0, MAX_LISTEN_SECONDS, "s"), default=LISTEN_SECONDS),
+        "seconds": Field(Number(MIN_LISTEN_SECONDS, MAX_LISTEN_SECONDS, "s"), default=LISTEN_SECONDS),
     }, doc="learn how the user says a word, from a recording or from the next thing said on a live source"),
     "forget": Verb({"word": _WORD}, doc="forget the user's own pronunciations of a word (the dictionary's stay)"),
     "learned": Verb({"words": Field(Texts(Text("a word as written", longest=MAX_WORD_CHARS), most=MAX_PHRASES),

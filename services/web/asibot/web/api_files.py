@@ -16,6 +16,7 @@ from fastapi.responses import FileResponse
 from pydantic import Field, StrictInt, StrictStr
 
 from asibot.errors import RpcError
+from asibot.messages import LISTEN_SECONDS, MAX_LISTEN_SECONDS, MIN_LISTEN_SECONDS
 from asibot.web import reference
 from asibot.web.models import Level, Number, RobotId, Strict
 from asibot.web.routing import known, off_loop, web_of
@@ -72,7 +73,7 @@ class Learn(Strict):
     """Learn how the user says `word` from what the page's microphone hears next."""
     word: Name
     page: Annotated[StrictStr, Field(pattern=r"^[0-9a-f]{8}$", description="the listening page's id (its hello)")]
-    seconds: Annotated[Number, Field(ge=1, le=20)] = 8
+    seconds: Annotated[Number, Field(ge=MIN_LISTEN_SECONDS, le=MAX_LISTEN_SECONDS)] = LISTEN_SECONDS
 
 
 class TaskBody(Strict):
