@@ -21,7 +21,7 @@ from asibot.testing import wait_until
 
 from . import switch
 from .conftest import ROOT, http, screenshot
-from .switch import choose, hold, moves, ringed, tap, tap_until, wait_ringed
+from .switch import choose, hold, moves, ring_label, ringed, tap, tap_until, wait_ringed
 from .test_browser import ArmWatch
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
@@ -186,6 +186,19 @@ def test_a_task_launched_with_space_alone_in_step_scanning(page, kitchen, task):
     choose(page, f"Launch {TASK}")
     wait_until(lambda: ran_the_task(kitchen), timeout=30, message="the task did not run")
     assert last_run(kitchen)["last"]["program"] == TASK
+
+
+@pytest.mark.parametrize("after,then", [("resume", "Row: Silent, Beep at each step"),
+                                         ("start", "Row: Commanding asibot-sim")])
+def test_after_a_select_the_ring_goes_on_from_where_the_person_works_or_from_the_top(page, after, then):
+    """By default the ring goes from the stop to the row of the control selected (where the
+    person works); "The Emergency stop, then the top" sends it to the page's first row."""
+    with_settings(page, "access", enabled=True, afterSelect=after)
+    tap(page)
+    choose(page, "Silent")                                              # chosen already: nothing changes
+    assert ringed(page) == [ESTOP]
+    tap(page)
+    assert ring_label(page).startswith(then), ring_label(page)
 
 
 RED_CAN = ROOT / "libs" / "common" / "asibot" / "examples" / "give_me_the_red_can.py"

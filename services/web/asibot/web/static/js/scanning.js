@@ -8,6 +8,9 @@
 // Moves: step (the switch moves the ring) or automatic (a timer does). One switch: tap = next,
 // hold = select (AsTeRICS-Grid's scheme); in automatic scanning any press selects. Two switches:
 // next and select. After `rounds` rounds without a select, scanning stops and waits for a press.
+// After a select the ring starts over at the stop and, by default, goes on from where the person
+// works: the control the page moved the keyboard focus to (a new step, the first choice of a
+// list just opened), else the control selected; the rest of the page follows, round to the top.
 // Every opened row or group ends with Back; right after a select changed the page, "Undo: back
 // to <page>" follows the stop and puts the page and the ring back as they were.
 //
@@ -109,9 +112,28 @@ function firstEntries() {
 
 function pageEntries() {
   const pattern = settings().pattern;
-  if (pattern === 'group') return groups();
-  const all = controls(document.body);
-  return pattern === 'linear' ? all.map(item) : rowsOf(all).map(rowEntry);
+  const all = pattern === 'group' ? groups() : controls(document.body);
+  return fromResume(pattern === 'rowcol' ? rowsOf(all).map(rowEntry) : pattern === 'linear' ? all.map(item) : all);
+}
+
+// Where the person works after a select (see the top): the focus the page moved, else the
+// control selected, while it is still on the page; null when the ring starts at the top.
+function resumeAt() {
+  if (!scan.resumeFrom) return null;
+  const focused = document.activeElement;
+  if (focused && focused !== document.body && !focused.closest('#scan-ring')) return focused;
+  return scan.resumeFrom.isConnected ? scan.resumeFrom : null;
+}
+
+// The entries from the first that holds `resumeAt()` or comes after it in the page, then the
+// ones before it: the page read on from where the person is, round to its top.
+function fromResume(entries) {
+  const at = resumeAt();
+  if (!at) return entries;
+  const after = (n) => n === at || n.contains(at) || at.contains(n)
+    || Boolean(at.compareDocumentPosition(n) & Node.DOCUMENT_POSITION_FOLLOWING);
+  const k = entries.findIndex((e) => [e.box, ...e.nodes].some((n) => n && after(n)));
+  return k <= 0 ? entries : [...entries.slice(k), ...entries.slice(0, k)];
 }
 
 // Home mode: the person's tasks and places (Home's panel, favourites.js) one level deep, and
@@ -139,11 +161,13 @@ function withBack(entry) {
 }
 
 // Where an opened row starts: after the control that is current there (the shown tab), so the
-// tab row scans from the page the person is on.
+// tab row scans from the page the person is on; else on the control where the person works.
 function startOf(inside) {
   const current = inside.findIndex((e) => e.nodes.length === 1
     && (e.nodes[0].getAttribute('aria-selected') === 'true' || e.nodes[0].getAttribute('aria-current') === 'page'));
-  return current < 0 ? 0 : (current + 1) % inside.length;
+  if (current >= 0) return (current + 1) % inside.length;
+  const at = resumeAt();
+  return Math.max(0, inside.findIndex((e) => e.nodes.length === 1 && e.nodes[0] === at));
 }
 
 // --- the ring ----------------------------------------------------------------------------------
@@ -262,6 +286,7 @@ const scan = {
   steps: 0,         // moves of the ring, as data-step (a test or a person's tool can follow it)
   lastTap: null,    // { which, at }: the last tap's release, for two quick taps = stop
   undo: null,       // { tab, label, levels }: the page shown and the ring before the last page change
+  resumeFrom: null, // the control last selected, when the ring goes on from there (resumeAt)
 };
 
 function level() { return scan.levels[scan.levels.length - 1]; }
@@ -308,6 +333,7 @@ function schedule() {
 // Start over at the top; in Home mode, inside the whole page, at the whole page's top (its
 // first entry is the stop too).
 function toTop() {
+  scan.resumeFrom = null;
   const page = scan.levels.length > 1 && scan.levels[1].page ? { ...scan.levels[1], index: 0, steps: 0 } : null;
   scan.levels = [{ build: topEntries, index: 0, steps: 0 }];
   if (page && settings().scope === 'home') scan.levels.push(page);
@@ -377,12 +403,18 @@ function select() {
   if (entry) activate(entry.nodes[0]);
 }
 
-function afterSelect() {
-  if (settings().afterSelect === 'start') toTop();
-  else level().steps = 0;
+function afterSelect(selected = null) {
+  const after = settings().afterSelect;
+  if (after === 'stay') level().steps = 0;
+  else {
+    toTop();
+    if (after === 'resume') scan.resumeFrom = selected;
+  }
   show();
   status();
 }
+
+function ringedControl() { return scan.entry ? scan.entry.nodes[0] : null; }
 
 function latch(stopIt) {
   scan.latched = stopIt;
@@ -394,7 +426,7 @@ function latch(stopIt) {
     if (scan.latched !== stopIt) return;
     scan.latched = null;
     ring.classList.remove('latched');
-    if (scan.running) afterSelect();
+    if (scan.running) afterSelect(ringedControl());
   };
 }
 
@@ -421,11 +453,11 @@ function activate(node) {
   const levels = scan.levels.map((lv) => ({ ...lv }));
   scan.undo = null;      // only the last step can be undone
   if (chooseControl(node, latch) === 'latched') {
-    if (!scan.latched && scan.running) afterSelect();    // the control acted and did not latch
+    if (!scan.latched && scan.running) afterSelect(node);    // the control acted and did not latch
     return;
   }
   if (pageChange) scan.undo = { tab: before, levels, label: `Undo: back to ${nameOf(before)}` };
-  if (scan.running) afterSelect();    // the select may have turned scanning off
+  if (scan.running) afterSelect(node);    // the select may have turned scanning off
 }
 
 // --- switch presses ----------------------------------------------------------------------------
@@ -456,7 +488,7 @@ function onDown(which) {
     scan.latched = null;
     ring.classList.remove('latched');
     stopIt();
-    if (scan.running) afterSelect();
+    if (scan.running) afterSelect(ringedControl());   // the held control: a second hold is near
     return;
   }
   if (!scan.running) { start(); return; }

@@ -24,7 +24,7 @@ export const CHOICES = {
   pattern: ['rowcol', 'linear', 'group'],
   mode: ['step', 'auto'],
   switches: [1, 2],
-  afterSelect: ['start', 'stay'],
+  afterSelect: ['resume', 'start', 'stay'],
   messages: ['fade', 'stay'],
   scope: ['page', 'home'],
 };
@@ -37,7 +37,7 @@ export const DEFAULTS = Object.freeze({
   intervalMs: 1000,
   holdMs: 400,
   rounds: 3,
-  afterSelect: 'start',
+  afterSelect: 'resume',
   sound: false,
   next: Object.freeze({ kind: 'key', code: 'Space', label: 'Space' }),
   select: Object.freeze({ kind: 'key', code: 'Enter', label: 'Enter' }),

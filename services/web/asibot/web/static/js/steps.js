@@ -309,6 +309,8 @@ export function stepsEditor({ onSaved, showPython }) {
     inSync: () => inSync,
     save: saveSteps,
     unmount: off,
+    // Where a program just made starts being read: its first step, or adding one (no steps yet).
+    focusStart: () => (list.querySelector('[data-focus="1:row"]') || root.querySelector('[data-focus="add:move"]'))?.focus(),
   };
 }
 

@@ -11,7 +11,7 @@ const LABELS = {
   mode: { heading: 'How the ring moves', values: [['step', 'Step: my switch moves it'], ['auto', 'Automatic: it moves by itself']] },
   pattern: { heading: 'Order', values: [['rowcol', 'Row, then column'], ['linear', 'One by one'], ['group', 'Groups']] },
   switches: { heading: 'Switches', values: [[1, 'One switch: tap = next, hold = select'], [2, 'Two switches: next and select']] },
-  afterSelect: { heading: 'After a select', values: [['start', 'Start again at the Emergency stop'], ['stay', 'Stay on the control']] },
+  afterSelect: { heading: 'After a select', values: [['resume', 'The Emergency stop, then where I was'], ['start', 'The Emergency stop, then the top'], ['stay', 'Stay on the control']] },
   sound: { heading: 'Sound', values: [[false, 'Silent'], [true, 'Beep at each step']] },
   scope: { heading: 'What the ring goes over', values: [['page', 'The whole page'], ['home', 'My tasks and places first (Home)']] },
   doubleTapStop: { heading: 'Two quick taps', values: [[true, 'Stop every robot'], [false, 'Move the ring twice']] },

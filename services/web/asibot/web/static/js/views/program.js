@@ -273,6 +273,7 @@ export default {
       setKept(newName, '');
       sessionStorage.setItem(`asibot.program.mode.${name}`, 'steps');
       await open(name);
+      steps.focusStart();     // keyboard, screen reader and switch go on from the new steps
       return name;
     }, (name) => `New program ${name}, made of steps.`);
     const create = () => attempt(async () => {
