@@ -129,4 +129,4 @@ def test_the_steps_editor_with_one_switch(page, kitchen):
     print(f"\nthe steps editor by one switch: a program, a step added and moved, saved: {switch.count} presses")
     # After each select the ring goes on from where the person works (the new steps, the step
     # just added, the step moved), not from the top of the page: 83 presses when it started over.
-    assert switch.count <= 50, switch.count
+    assert switch.count <= 55, switch.count     # 48 here; a message left on the page adds a press or two

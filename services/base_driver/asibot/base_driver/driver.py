@@ -208,7 +208,7 @@ class BaseDriver(GuardedBase):
         log.info("connected to %s (%s %s) on %s, params %s", ident.name, ident.klass,
                  ident.subclass, self.port, params.subclass)
         self.on_event("info", "connected",
-                       f"Connected to the Pioneer {ident.name!r} ({ident.subclass}) on {self.port}.")
+                      f"Connected to the Pioneer {ident.name!r} ({ident.subclass}) on {self.port}.")
         self.on_event("info", "ready", self.arming.ready_text("The base"))
         return True
 
@@ -217,8 +217,8 @@ class BaseDriver(GuardedBase):
             self._reported_unreachable = True
             log.warning("cannot reach the Pioneer on %s: %s", self.port, reason)
             self.on_event("error", "disconnected",
-                           f"Cannot reach the Pioneer on {self.port} ({reason}); check the cable and "
-                           f"the port; retrying every {RECONNECT_PERIOD:g} s.")
+                          f"Cannot reach the Pioneer on {self.port} ({reason}); check the cable and "
+                          f"the port; retrying every {RECONNECT_PERIOD:g} s.")
 
     def _lost(self, reason: str) -> None:
         with self._lock:
@@ -229,8 +229,8 @@ class BaseDriver(GuardedBase):
         self._reported_unreachable = True
         log.warning("lost the Pioneer on %s: %s", self.port, reason)
         self.on_event("error", "disconnected",
-                       f"Lost the Pioneer on {self.port} ({reason}). Its own watchdog stops it; "
-                       "reconnecting, and it will not resume the old velocity.")
+                      f"Lost the Pioneer on {self.port} ({reason}). Its own watchdog stops it; "
+                      "reconnecting, and it will not resume the old velocity.")
 
     def _service_line(self) -> None:
         client = self._client
