@@ -291,8 +291,11 @@ class ArmDriver(GuardedArm):
         self.master.tx_error = ""
         now = time.monotonic()
         fb = self.master.snapshot()
+        # A drive that went silent is brought up again even when its heartbeat came back before
+        # this reset was served: its own heartbeat consumer may have left it pre-operational.
         lost = [j.node for j in self.joints
-                if j.node not in self._up or fb[j.node].booted or self._silent(fb[j.node], fb, now)]
+                if j.node not in self._up or fb[j.node].booted or self._silent(fb[j.node], fb, now)
+                or ("heartbeat_lost", j.node) in self._reported]
         log.info("resetting the fault; re-initialising drives %s", lost or "none")
         self.master.start_cyclic()      # again, if the loop guard had stopped SYNC and the heartbeat
         self._bring_up(lost)
