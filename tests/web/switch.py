@@ -156,3 +156,20 @@ class Presses:
                 return now
             self.tap()
         raise AssertionError(f"the ring never got there; it is on {ringed(self.page)}")
+
+
+def make_pick_program(page, presses: Presses, point: str) -> None:
+    """By one switch on the Program page: a "Pick it up" program from `point`, a Wait added at the
+    end and moved up before the lift, saved (the test bounds its presses, the bench counts them)."""
+    presses.to("New: Pick it up…")
+    # A person sees the points offered before pressing on; a script would tap past them.
+    page.get_by_role("button", name=f"Choose point {point}").wait_for(timeout=10000)
+    presses.to(f"Choose point {point}")
+    listed = page.get_by_role("list", name="Steps")
+    listed.locator(".step-sentence").nth(4).wait_for(timeout=10000)
+    presses.to("Wait")
+    listed.locator(".step-sentence").nth(5).wait_for(timeout=10000)
+    presses.to("Move step 6 up")
+    page.get_by_text("Unsaved changes").wait_for(timeout=10000)
+    presses.to("Save steps")
+    page.get_by_text("Steps saved").wait_for(timeout=10000)

@@ -387,7 +387,11 @@ class Controller:
     def _ended(self, hold: np.ndarray, now: float) -> Reference:
         """The reference where a motion ended (_hold), sent now and again until the arm is there."""
         self._resend_at, self._resend_until = now + RESEND_S, now + SETTLE_S
-        return Reference(hold.tolist(), [0.0] * self.n)
+        return self._still_at(hold)
+
+    def _still_at(self, q: np.ndarray) -> Reference:
+        """Stay at q: the one shape of every hold, first sent, resent or asked for."""
+        return Reference(q.tolist(), [0.0] * self.n)
 
     def _resend(self, now: float) -> Reference | None:
         if self._resend_at is None or self._hold is None:
@@ -399,7 +403,7 @@ class Controller:
         if now < self._resend_at:
             return None
         self._resend_at = now + RESEND_S
-        return Reference(self._hold.tolist(), [0.0] * self.n)
+        return self._still_at(self._hold)
 
     def _stream_tick(self, now: float) -> Reference | None:
         if self.watchdog.silent(now):
@@ -457,7 +461,7 @@ class Controller:
 
     def _stream_refused(self, hold: np.ndarray) -> Reference:
         """Hold still at the edge of the workspace instead of jumping; streaming goes on."""
-        return Reference(hold.tolist(), [0.0] * self.n)
+        return self._still_at(hold)
 
     # --- internals ----------------------------------------------------------------------
     def _bump(self, what: RpcError) -> None:
@@ -506,4 +510,4 @@ class Controller:
     def hold_reference(self) -> Reference | None:
         """After a stop: where the arm should stay (measured position at the stop)."""
         with self._lock:
-            return None if self._hold is None else Reference(self._hold.tolist(), [0.0] * self.n)
+            return None if self._hold is None else self._still_at(self._hold)

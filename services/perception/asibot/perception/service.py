@@ -111,6 +111,7 @@ class PerceptionService(Service):
         self._rgb: tuple[m.RgbImage, float] | None = None
         self._silent: set[str] = set()
         self._first_frame: dict[str, float] = {}   # when _watch first saw each camera's frame
+        self.watched_at: float | None = None         # the clock when the cameras were last watched
         self.scans = 0
         self.events_sent = 0
         self._pub_scan = bus.publisher(keys.scan(robot), m.LaserScan)
@@ -214,26 +215,29 @@ class PerceptionService(Service):
         self._pub_event.put(event)
 
     def _watch(self) -> None:
-        """Say once when a camera falls silent, and once when it is back."""
         while not self._stop.wait(WATCH_PERIOD_S):
-            now = self.clock()
-            for name in self.assembler.heard():
-                self._first_frame.setdefault(name, now)
-            silent = {name for name in self.assembler.silent(now)
-                      if now - self._first_frame.get(name, self.started) >= STARTUP_GRACE_S}
-            for name in sorted(silent - self._silent):
-                watching = [c for c in self.opt.depth_cameras if c not in silent]
-                rest = (f"the scan covers only the {' and '.join(watching)} camera{'s' if len(watching) > 1 else ''}"
-                        if watching else "no scan is published")
-                since = (f"for {self.opt.freshness:g} s." if name in self._first_frame else
-                         f"since perception started {now - self.started:.0f} s ago (is the sim or the camera's "
-                         "driver running?).")
-                self._event(m.Event(level="warning", code="camera_silent",
-                                    text=f"The {name} camera has sent no depth image {since} Obstacles it watches "
-                                         f"are not seen; {rest}."))
-            for name in sorted(self._silent - silent):
-                self._event(m.Event(level="info", code="camera_working", text=f"The {name} camera works again."))
-            self._silent = silent
+            self._watch_once(self.clock())
+
+    def _watch_once(self, now: float) -> None:
+        """Say once when a camera falls silent, and once when it is back; watched_at says when it looked."""
+        for name in self.assembler.heard():
+            self._first_frame.setdefault(name, now)
+        silent = {name for name in self.assembler.silent(now)
+                  if now - self._first_frame.get(name, self.started) >= STARTUP_GRACE_S}
+        for name in sorted(silent - self._silent):
+            watching = [c for c in self.opt.depth_cameras if c not in silent]
+            rest = (f"the scan covers only the {' and '.join(watching)} camera{'s' if len(watching) > 1 else ''}"
+                    if watching else "no scan is published")
+            since = (f"for {self.opt.freshness:g} s." if name in self._first_frame else
+                     f"since perception started {now - self.started:.0f} s ago (is the sim or the camera's "
+                     "driver running?).")
+            self._event(m.Event(level="warning", code="camera_silent",
+                                text=f"The {name} camera has sent no depth image {since} Obstacles it watches "
+                                     f"are not seen; {rest}."))
+        for name in sorted(self._silent - silent):
+            self._event(m.Event(level="info", code="camera_working", text=f"The {name} camera works again."))
+        self._silent = silent
+        self.watched_at = now
 
     # ------------------------------------------------------------------ RPC
     def _find(self, a: Any) -> dict:

@@ -112,8 +112,11 @@ function firstEntries() {
 
 function pageEntries() {
   const pattern = settings().pattern;
-  const all = pattern === 'group' ? groups() : controls(document.body);
-  return fromResume(pattern === 'rowcol' ? rowsOf(all).map(rowEntry) : pattern === 'linear' ? all.map(item) : all);
+  let entries;
+  if (pattern === 'group') entries = groups();
+  else if (pattern === 'rowcol') entries = rowsOf(controls(document.body)).map(rowEntry);
+  else entries = controls(document.body).map(item);
+  return fromResume(entries);
 }
 
 // Where the person works after a select (see the top): the focus the page moved, else the

@@ -289,14 +289,17 @@ export function stepsEditor({ onSaved, showPython }) {
   }
 
   const off = onPointsChange((data) => { points = data.points; if (choosing || editing) draw(); });
+  // Save and its row come after the steps and the adders, as a form's submit does, and stay in
+  // sight at the bottom of the window (sticky): the next thing after an edit by Tab or by one switch.
   const root = el('div', { class: 'steps-editor' },
     status,
-    el('div', { class: 'row' }, save, showCode, discard,
-      el('button', { type: 'button', onclick: () => showPython() }, 'Edit as Python')),
     problem,
     list,
     el('h3', {}, 'Add a step'),
     where, adders, chooser,
+    el('div', { class: 'row steps-actions', role: 'group', 'aria-label': 'Save or discard the steps' },
+      save, showCode, discard,
+      el('button', { type: 'button', onclick: () => showPython() }, 'Edit as Python')),
     code);
   draw();
   loadPoints().catch((e) => notify(e.message));
