@@ -1,40 +1,61 @@
-"""The driver's arm rules, without physics: limits, speeds, watchdog, estop, faults."""
+"""The sim's arm rules, without physics: limits, speeds, watchdog, estop, faults, as a driver's.
+
+The rules themselves are GuardedArm's and JointReference's (tests/common/test_guarded_arm.py,
+test_joint_reference.py); these check that the sim's arm keeps them on its own clock and lock,
+and what is its own: the servos follow the set-point, a blocked joint faults."""
 
 import math
 import re
+import threading
 
 import numpy as np
 import pytest
 
-from asibot.messages import ArmCommand
 from asibot.messages import COMMAND_WATCHDOG_S
-from asibot.sim.arm import (POSITION_TOLERANCE_RAD, VELOCITY_TOLERANCE, BadCommand, CommandRejected, JointLimits,
-                            JointTracker)
+from asibot.safety.events import CommandRefused
+from asibot.safety.joint_reference import POSITION_TOLERANCE_RAD, VELOCITY_TOLERANCE
+from asibot.sim.arm import JointLimits, SimArm
 
 DT = 0.002
 
 
-def tracker(notices=None):
-    limits = JointLimits.of(["a", "b"], [-1.0, -2.0], [1.0, 2.0], [0.5, 1.0])
-    return JointTracker(limits, np.zeros(2), notify=(notices.append if notices is not None else lambda n: None))
+class Arm:
+    """A SimArm on a hand-turned clock; `follow`: the joints are where the set-point is."""
 
+    def __init__(self) -> None:
+        self.now = 0.0
+        self.events: list[tuple[str, str, str]] = []
+        self.stuck = False
+        self.at: list[float] | None = None     # where the joints are measured, if not at the set-point
+        limits = JointLimits.of(["a", "b"], [-1.0, -2.0], [1.0, 2.0], [0.5, 1.0])
+        self.arm = SimArm(limits, [0.0, 0.0], DT, lambda *e: self.events.append(e), clock=lambda: self.now,
+                          lock=threading.RLock(), measured=self.measured)
 
-def run(t, seconds, start=0.0, follow=True):
-    now = start
-    for _ in range(int(round(seconds / DT))):
-        now += DT
-        t.step(t.q_ref if follow else np.zeros(2), DT, now)
-    return now
+    def measured(self) -> list[float]:
+        if self.at is not None:
+            return self.at
+        return [0.0, 0.0] if self.stuck else self.arm.q_ref.tolist()
+
+    def command(self, mode: str, values: list[float], velocities: list[float] | None = None) -> bool:
+        return self.arm.command(mode, values, velocities or [], "kinematics")
+
+    def run(self, seconds: float) -> None:
+        for _ in range(int(round(seconds / DT))):
+            self.now += DT
+            self.arm.step(self.measured(), self.now)
+
+    def codes(self) -> list[str]:
+        return [code for _, code, _ in self.events]
 
 
 def test_position_is_reached_at_the_max_speed_and_stays_within_limits():
-    t = tracker()
-    t.command(ArmCommand(mode="position", values=[1.0 + POSITION_TOLERANCE_RAD / 2, -0.5]), 0.0)
-    run(t, 0.5)
-    assert t.q_ref[0] == pytest.approx(0.25, abs=1e-9)    # 0.5 rad/s for 0.5 s
-    assert t.q_ref[1] == pytest.approx(-0.5, abs=1e-9)    # reached
-    run(t, 5.0, 0.5)
-    assert t.q_ref[0] == 1.0                               # noise past the limit: clamped to it
+    t = Arm()
+    t.command("position", [1.0 + POSITION_TOLERANCE_RAD / 2, -0.5])
+    t.run(0.5)
+    assert t.arm.q_ref[0] == pytest.approx(0.25, abs=1e-9)    # 0.5 rad/s for 0.5 s
+    assert t.arm.q_ref[1] == pytest.approx(-0.5, abs=1e-9)    # reached
+    t.run(5.0)
+    assert t.arm.q_ref[0] == 1.0                               # noise past the limit: clamped to it
 
 
 @pytest.mark.parametrize("mode, values, ff, says", [
@@ -47,106 +68,94 @@ def test_position_is_reached_at_the_max_speed_and_stays_within_limits():
     ("position", [0.0, math.nan], None, "joint b got nan, not a finite number"),
 ])
 def test_values_past_a_limit_are_refused_not_clipped(mode, values, ff, says):
-    t = tracker()
-    t.command(ArmCommand(mode="position", values=[0.5, 0.5]), 0.0)
-    cmd = ArmCommand(mode=mode, values=[0.0, 0.0], velocities=[0.0, 0.0] if ff else [])
-    cmd.values, cmd.velocities = values, ff or []   # bypass the message's own checks (NaN)
-    with pytest.raises(BadCommand, match=re.escape(says)):
-        t.command(cmd, 0.1)
-    run(t, 2.0, 0.1)
-    assert t.mode == "position" and t.q_ref == pytest.approx([0.5, 0.5])   # the previous goal
+    t = Arm()
+    t.command("position", [0.5, 0.5])
+    with pytest.raises(CommandRefused, match=re.escape(says)):
+        t.command(mode, values, ff)
+    t.run(2.0)
+    assert t.arm.mode == "position" and t.arm.q_ref == pytest.approx([0.5, 0.5])   # the previous goal
+    assert t.arm.counters["rejected_commands"] == 1
 
 
 def test_a_joint_measured_past_a_limit_may_be_held_there():
     """MuJoCo's servos overshoot a limit by a few mrad as they arrive; the kinematics service
-    holds where it measured the arm: not refused, and the reference stays within the limits."""
-    t = tracker()
-    t.command(ArmCommand(mode="position", values=[1.008, 0.0]), 0.0, q_measured=[1.008, 0.0])
-    with pytest.raises(BadCommand, match="upper limit"):
-        t.command(ArmCommand(mode="position", values=[1.02, 0.0]), 0.0, q_measured=[1.008, 0.0])
-    run(t, 3.0)
-    assert t.q_ref[0] == 1.0
+    holds where it measured the arm: not refused, and the set-point stays within the limits."""
+    t = Arm()
+    t.at = [1.008, 0.0]
+    t.command("position", [1.008, 0.0])
+    with pytest.raises(CommandRefused, match="upper limit"):
+        t.command("position", [1.02, 0.0])
+    t.run(3.0)
+    assert t.arm.q_ref[0] == 1.0
 
 
-def test_wrong_joint_count_is_rejected_and_changes_nothing():
-    t = tracker()
-    with pytest.raises(CommandRejected, match="2 joints"):
-        t.command(ArmCommand(mode="position", values=[0.1, 0.2, 0.3]), 0.0)
-    cmd = ArmCommand(mode="position", values=[0.1, 0.2])
-    cmd.velocities = [0.1]  # bypass the message's own check
-    with pytest.raises(CommandRejected, match="feed-forward"):
-        t.command(cmd, 0.0)
-    assert t.mode == "idle"
-
-
-def test_non_finite_values_are_rejected():
-    t = tracker()
-    cmd = ArmCommand(mode="velocity", values=[0.1, 0.1])
-    cmd.values = [math.nan, 0.0]  # bypass the message's own check, as a buggy decoder might
-    with pytest.raises(CommandRejected, match="joint a got nan, not a finite number"):
-        t.command(cmd, 0.0)
-    assert t.mode == "idle"
+def test_wrong_joint_count_is_refused_with_the_drivers_sentence_and_changes_nothing():
+    t = Arm()
+    with pytest.raises(ValueError, match=re.escape("the arm has 2 joints (a, b); the command has 3 values")):
+        t.command("position", [0.1, 0.2, 0.3])
+    with pytest.raises(ValueError, match="velocities must be empty or have 2 values"):
+        t.command("position", [0.1, 0.2], [0.1])
+    assert t.arm.mode == "idle"
 
 
 def test_velocity_mode_stops_after_the_watchdog_and_says_so():
-    notices = []
-    t = tracker(notices)
-    t.command(ArmCommand(mode="velocity", values=[0.4, 0.0]), 0.0)
-    run(t, 1.0)
-    assert t.q_ref[0] == pytest.approx(0.4 * COMMAND_WATCHDOG_S, abs=2 * DT)
-    assert [n.code for n in notices] == ["watchdog"]
+    t = Arm()
+    t.command("velocity", [0.4, 0.0])
+    t.run(1.0)
+    assert t.arm.q_ref[0] == pytest.approx(0.4 * COMMAND_WATCHDOG_S, abs=2 * DT)
+    assert t.codes() == ["watchdog"]
+    assert t.events[0][2] == "No velocity command for 200 ms: the arm stopped and holds its position."
 
 
 def test_velocity_noise_over_the_max_speed_is_clamped():
-    t = tracker()
+    t = Arm()
     over = 1 + VELOCITY_TOLERANCE / 2
-    for k in range(50):  # keep the watchdog fed for 0.1 s
-        t.command(ArmCommand(mode="velocity", values=[0.5 * over, -1.0 * over]), k * DT)
-        t.step(t.q_ref, DT, (k + 1) * DT)
-    assert t.q_ref[0] == pytest.approx(0.5 * 0.1, rel=1e-6)
-    assert t.q_ref[1] == pytest.approx(-1.0 * 0.1, rel=1e-6)
+    for _ in range(50):  # keep the watchdog fed for 0.1 s
+        t.command("velocity", [0.5 * over, -1.0 * over])
+        t.run(DT)
+    assert t.arm.q_ref[0] == pytest.approx(0.5 * 0.1, rel=1e-6)
+    assert t.arm.q_ref[1] == pytest.approx(-1.0 * 0.1, rel=1e-6)
 
 
-def test_estop_is_latched_ignores_commands_and_notifies_once():
-    notices = []
-    t = tracker(notices)
-    t.command(ArmCommand(mode="velocity", values=[0.4, 0.0]), 0.0)
-    run(t, 0.1)
-    t.set_estop(True, "button")
-    t.set_estop(True, "button")
-    held = t.q_ref.copy()
-    with pytest.raises(CommandRejected, match="emergency stop"):
-        t.command(ArmCommand(mode="velocity", values=[0.4, 0.0]), 0.1)
-    run(t, 0.5, 0.1)
-    assert np.allclose(t.q_ref, held)
-    assert [n.code for n in notices] == ["estop"]
-    t.set_estop(False)
-    t.command(ArmCommand(mode="position", values=[0.0, 1.0]), 0.6)
-    run(t, 2.0, 0.6)
-    assert t.q_ref[1] == pytest.approx(1.0)
+def test_the_estop_holds_the_arm_ignores_commands_and_arms_it_again_for_a_new_stream():
+    t = Arm()
+    t.command("velocity", [0.4, 0.0])
+    t.run(0.1)
+    t.arm.set_estop(True, "button")
+    t.arm.set_estop(True, "button")
+    held = t.arm.q_ref.copy()
+    assert t.command("velocity", [0.4, 0.0]) is False          # ignored, never queued
+    t.run(0.5)
+    assert np.allclose(t.arm.q_ref, held)
+    assert t.codes() == ["estop"] and t.arm.counters["ignored_commands"] == 1
+    t.arm.set_estop(False)
+    assert t.codes() == ["estop", "estop_released", "ready"]
+    t.command("position", [0.0, 1.0])                         # a new stream: its sender paused 0.5 s
+    t.run(2.0)
+    assert t.arm.q_ref[1] == pytest.approx(1.0)
 
 
-def test_a_blocked_joint_faults_and_needs_a_reset():
-    notices = []
-    t = tracker(notices)
-    t.command(ArmCommand(mode="position", values=[0.9, 0.0]), 0.0)
-    run(t, 2.0, follow=False)  # the measured position never moves: blocked
-    assert t.mode == "fault" and "cannot follow" in t.fault
-    assert notices[-1].code == "following_error"
-    with pytest.raises(CommandRejected, match="reset_fault"):
-        t.command(ArmCommand(mode="position", values=[0.0, 0.0]), 2.0)
-    t.reset_fault([0.0, 0.0])
-    t.command(ArmCommand(mode="position", values=[0.1, 0.0]), 2.0)
-    assert t.mode == "position" and t.fault == ""
+def test_a_blocked_joint_faults_and_is_ignored_until_a_reset_served_at_once():
+    t = Arm()
+    t.command("position", [0.9, 0.0])
+    t.stuck = True                    # the measured position never moves: blocked
+    t.run(2.0)
+    assert t.arm.mode == "fault" and "cannot follow" in t.arm.fault
+    assert t.codes()[-1] == "following_error" and t.arm.counters["faults"] == 1
+    assert t.arm.q_ref == pytest.approx([0.0, 0.0])            # it holds where it is stuck
+    assert t.command("position", [0.0, 0.0]) is False
+    t.stuck = False
+    assert t.arm.reset_fault() == {}                           # no control thread to wait for
+    assert t.codes()[-2:] == ["fault_reset", "ready"]
+    t.now += COMMAND_WATCHDOG_S + DT                           # a new stream (asibot.safety.arming)
+    assert t.command("position", [0.1, 0.0]) is True
+    assert t.arm.mode == "position" and t.arm.fault == ""
 
 
 def test_feedforward_extrapolates_a_little_but_never_past_limits():
-    t = tracker()
-    t.q_ref[:] = [0.95, 0.0]
-    t.command(ArmCommand(mode="position", values=[0.95, 0.0], velocities=[0.5, 0.5]), 0.0)
-    run(t, 0.5)
-    assert t.q_ref[0] == pytest.approx(0.975)          # at most FEEDFORWARD_HORIZON (50 ms) ahead
-    assert t.q_ref[1] == pytest.approx(0.5 * 0.05)
-    t.command(ArmCommand(mode="position", values=[0.99, 0.0], velocities=[0.5, 0.0]), 0.5)
-    run(t, 0.5, 0.5)
-    assert t.q_ref[0] == pytest.approx(1.0)            # never past the limit
+    t = Arm()
+    t.arm.restart([0.95, 0.0])
+    t.command("position", [0.95, 0.0], [0.5, 0.5])
+    t.run(0.5)
+    assert t.arm.q_ref[0] == pytest.approx(1.0)          # at most the horizon ahead, and never past the limit
+    assert t.arm.q_ref[1] == pytest.approx(0.5 * 0.1)    # FEED_FORWARD_HORIZON_S (100 ms) ahead

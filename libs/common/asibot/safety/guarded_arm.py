@@ -16,8 +16,10 @@ thread and a way of holding its motors; the rest is the same for every arm besid
 
 Each of these tells the user through `on_event(level, code, text)` in the same words for
 every arm. A subclass gives `_hold`, `_moving`, `_streaming`, `_check_limits`, `_apply` and
-`_reset`, and sets `arm` (its name in a sentence), `line` (what to check when a reset hangs)
-and `after_reset` (how the arm stands then).
+`_reset`, and sets `arm` (its name in a sentence), `line` (what to check when a reset hangs),
+`after_reset` (how the arm stands then) and `held` (what the estop leaves it doing). The sim
+gives its own clock (simulated time) and lock (the physics step's), and serves a reset at once
+(`_wait_for_reset`): whoever holds its lock is its control thread.
 """
 
 from __future__ import annotations
@@ -48,11 +50,15 @@ class GuardedArm(abc.ABC):
     """What to check when a fault reset does not finish: "the CAN bus", "the serial cable"."""
     after_reset = "the arm holds its position"
     """How the arm stands after a fault reset, in "The fault was reset: ..."."""
+    held = "the arm holds its position and ignores motion commands until it is released"
+    """What the robot does under the emergency stop, in its Event (asibot.safety.events.estop_said)."""
 
-    def __init__(self, names: list[str], on_event: EventSink) -> None:
+    def __init__(self, names: list[str], on_event: EventSink, *, clock: Callable[[], float] = time.monotonic,
+                 lock: threading.RLock | None = None) -> None:
         self.names = list(names)
         self.on_event = on_event
-        self._lock = threading.RLock()
+        self.clock = clock
+        self._lock = lock if lock is not None else threading.RLock()
         self.estop = False
         self._faulted = True               # until the control thread has brought the arm up
         self.arming = Arming()             # a driver starts armed (asibot.safety.arming says why)
@@ -117,7 +123,7 @@ class GuardedArm(abc.ABC):
             except ValueError:
                 self.counters["rejected_commands"] += 1
                 raise
-            now = time.monotonic()
+            now = self.clock()
             if not self._may_move(controller, now, "the arm"):
                 return False
             self.watchdog.feed(now)        # a command of the arm's, not the gripper's, keeps a stream going
@@ -128,7 +134,7 @@ class GuardedArm(abc.ABC):
         """A command of a controller that does not hold the arm (refused by the service): noted,
         so that its stream does not move the arm the moment it takes over."""
         with self._lock:
-            self.arming.heard(controller, time.monotonic())
+            self.arming.heard(controller, self.clock())
 
     def set_estop(self, engaged: bool, reason: str = "", by: str = "") -> None:
         with self._lock:
@@ -142,8 +148,7 @@ class GuardedArm(abc.ABC):
             else:
                 self.arming.disarm(f"the emergency stop was released{who}")
                 ready = self.arming.ready_text("The arm")
-        self.on_event(*estop_said(engaged, reason, by, "the arm holds its position and ignores motion commands "
-                                                        "until it is released"))
+        self.on_event(*estop_said(engaged, reason, by, self.held))
         if not engaged:
             self.on_event("info", "ready", ready)
 
@@ -173,14 +178,18 @@ class GuardedArm(abc.ABC):
             if self._reset_request is not None:
                 raise FaultError("A fault reset is already running; wait for it to finish.")
             self._reset_request = (done, result)
-        if not done.wait(timeout):
-            raise FaultError(f"The fault reset did not finish within {timeout:g} s; check {self.line}.")
+        self._wait_for_reset(done, timeout)
         outcome = result[0]
         if isinstance(outcome, Exception):
             raise FaultError(str(outcome))
         return outcome
 
     # ------------------------------------------------------------ for the driver
+    def _wait_for_reset(self, done: threading.Event, timeout: float) -> None:
+        """Until the control thread has served the reset asked for (`_serve_reset`)."""
+        if not done.wait(timeout):
+            raise FaultError(f"The fault reset did not finish within {timeout:g} s; check {self.line}.")
+
     def _reject(self, sentence: str) -> None:
         self.counters["rejected_commands"] += 1
         raise ValueError(sentence)

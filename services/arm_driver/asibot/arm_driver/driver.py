@@ -21,7 +21,7 @@ from asibot.arm_driver import emcy, objects
 from asibot.arm_driver.cia402 import State
 from asibot.arm_driver.config import ArmConfig
 from asibot.arm_driver.master import CanopenMaster, DriveError, Feedback, LoopStalled
-from asibot.arm_driver.motion import JointReference
+from asibot.safety.joint_reference import JointReference
 from asibot.messages import ArmState
 from asibot.safety.guarded_arm import EventSink, FaultError, GuardedArm
 from asibot.timing import Ticker

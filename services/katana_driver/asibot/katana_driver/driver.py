@@ -26,6 +26,7 @@ from asibot.messages import ArmState, GripperState
 from asibot.robots import RobotSpec
 from asibot.safety.events import CommandRefused, quantity
 from asibot.safety.guarded_arm import EventSink, FaultError, GuardedArm
+from asibot.safety.joint_reference import POSITION_TOLERANCE_RAD, check_limits
 from asibot.timing import Ticker
 
 log = logging.getLogger(__name__)
@@ -33,8 +34,6 @@ log = logging.getLogger(__name__)
 #: Cycles a second. One cycle is two 'N' (23 bytes each, request and reply) and at most six
 #: 'C' (15 bytes each): 136 bytes, 24 ms at 57600 baud (10 bits a byte), within 40 ms.
 CONTROL_RATE_HZ = 25
-POSITION_TOLERANCE_RAD = 1e-4
-VELOCITY_TOLERANCE = 1e-3
 #: The fingers hold something when they were told to close this much further than they are.
 GRIP_SLACK_M = 0.005
 
@@ -157,29 +156,8 @@ class KatanaDriver(GuardedArm):
         return self.mode == "velocity" and any(self._velocity)
 
     def _check_limits(self, mode: str, values: list[float], velocities: list[float]) -> None:
-        for name, v in zip(self.names, values + velocities):
-            if not math.isfinite(v):
-                raise CommandRefused("not_finite", f"joint {name} got {quantity(v)}, not a finite number")
-        if mode == "velocity":
-            self._within_speeds(values, "velocity")
-            return
         here = [self.setpoint] + ([self._measured] if self._measured is not None else [])
-        for i, v in enumerate(values):
-            lo, hi = self.lower[i], self.upper[i]
-            if v > max([hi] + [h[i] for h in here]) + POSITION_TOLERANCE_RAD:
-                raise CommandRefused("position_limit", f"joint {self.names[i]} position {quantity(v, 'rad', hi)} "
-                                                       f"is beyond its upper limit {quantity(hi, 'rad', v)}")
-            if v < min([lo] + [h[i] for h in here]) - POSITION_TOLERANCE_RAD:
-                raise CommandRefused("position_limit", f"joint {self.names[i]} position {quantity(v, 'rad', lo)} "
-                                                       f"is beyond its lower limit {quantity(lo, 'rad', v)}")
-        if velocities:
-            self._within_speeds(velocities, "velocity feed-forward")
-
-    def _within_speeds(self, values: list[float], what: str) -> None:
-        for name, v, m in zip(self.names, values, self.vmax):
-            if abs(v) > m * (1.0 + VELOCITY_TOLERANCE):
-                raise CommandRefused("speed_limit", f"joint {name} {what} {quantity(v, 'rad/s', m)} is beyond "
-                                                    f"its max speed {quantity(m, 'rad/s', abs(v))}")
+        check_limits(self, mode, values, velocities, here)
 
     # ------------------------------------------------------------ the control thread
     def _run(self) -> None:

@@ -27,6 +27,7 @@ from asibot import keys
 from asibot import messages as m
 from asibot.bus import Bus, Publisher
 from asibot.safety.driver_contract import DriverContract, command
+from asibot.safety.guarded_arm import FaultError
 from asibot.errors import RpcError
 from asibot.runtime import Service
 from asibot.sim import viewer
@@ -118,7 +119,8 @@ class SimService(Service):
         self._published = 0                       # physics ticks published, under _tick_done
         self._tick_done = threading.Condition()
         commands = [command("arm", self.sim.command_arm, lambda c: self.sim.heard("arm", c)),
-                    command("gripper", lambda cmd: self.sim.command_gripper(cmd.opening))]
+                    command("gripper", lambda cmd: self.sim.command_gripper(cmd.opening, cmd.controller),
+                            lambda c: self.sim.heard("arm", c))]
         if sim.base:
             commands.append(command("cmd_vel", lambda cmd: self.sim.command_base(cmd.vx, cmd.wz, cmd.controller),
                                     lambda c: self.sim.heard("base", c)))
@@ -136,8 +138,10 @@ class SimService(Service):
 
     # ------------------------------------------------------------------ RPC
     def _reset_fault(self) -> dict:
-        self.sim.reset_fault()
-        return {}
+        try:
+            return self.sim.reset_fault()
+        except FaultError as exc:
+            raise RpcError("fault", str(exc)) from None
 
     def _reset_world(self, a: Any) -> dict:
         """Reset, then answer once the reset world has been published: a controller asked to

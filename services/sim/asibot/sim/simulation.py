@@ -5,10 +5,11 @@ its state, and tests drive it directly, stepping as fast as the CPU allows. All 
 simulation time (`data.time`), so the 200 ms watchdog means 200 ms of simulated time in
 both real-time and fast mode. Thread-safe: every public method takes the lock.
 
-The sim keeps the driver contract's safety rules like a hardware driver: whose commands it
-obeys is decided by the service (asibot.safety.ownership); after an estop release, a fault reset or
-a change of controller, a stream of arm or base commands from before moves nothing until it
-pauses for a watchdog period (asibot.safety.arming, on the sim's clock).
+The sim keeps the driver contract's safety rules like a hardware driver, with the same code:
+its arm is a GuardedArm (sim/arm.py) and its base a GuardedBase (sim/base.py), on the sim's
+clock. Whose commands it obeys is decided by the service (asibot.safety.ownership); after an
+estop release, a fault reset or a change of controller, a stream of arm or base commands from
+before moves nothing until it pauses for a watchdog period (asibot.safety.arming).
 """
 
 from __future__ import annotations
@@ -21,9 +22,9 @@ import mujoco
 import numpy as np
 
 from asibot import messages as m
-from asibot.safety.arming import Arming
+from asibot.safety.events import CommandRefused
 from asibot.sim import sensors
-from asibot.sim.arm import BadCommand, CommandRejected, JointLimits, JointTracker, Notice
+from asibot.sim.arm import JointLimits, Notice, SimArm
 from asibot.sim.base import BaseDrive, Odometer
 from asibot.sim.places import load_places
 from asibot.sim.scene import WORLDS, Base, Scene, build
@@ -64,15 +65,17 @@ class Simulation:
         self.notices: "queue.SimpleQueue[Notice]" = queue.SimpleQueue()
         self.limits = JointLimits.of(self.robot.joint_names, self.robot.lower, self.robot.upper,
                                      self.robot.max_velocity)
-        self.arm = JointTracker(self.limits, np.asarray(self.robot.home, float), notify=self.notices.put)
+        held = ("the base is stopped, the arm holds its position, and both ignore motion commands until the "
+                "stop is released") if self.scene.base else None     # the arm's Event says it for both
+        self.arm = SimArm(self.limits, self.robot.home, self._dt, self._notice, clock=lambda: self.time,
+                          lock=self.lock, measured=lambda: self.data.qpos[self.scene.arm_qpos], held=held)
         self.gripper_goal = self.scene.gripper.max_opening
         self.base = BaseDrive(self._notice, clock=lambda: self.time) if self.scene.base else None
         self.odom = Odometer(noise=odom_noise, seed=seed) if self.scene.base else None
         self.battery = sensors.Battery()
         self.places = load_places(self.world)
-        self.estop = False
         # Re-arming of each part after a recovery; a sim starts armed, as a driver does.
-        self.arming = {"arm": Arming()}
+        self.arming = {"arm": self.arm.arming}
         if self.base is not None:
             self.arming["base"] = self.base.arming
         self._odom_acc = 0.0
@@ -89,6 +92,10 @@ class Simulation:
     def time(self) -> float:
         return float(self.data.time)
 
+    @property
+    def estop(self) -> bool:
+        return self.arm.estop
+
     def reset_world(self) -> None:
         """Everything back to the MJCF's initial state, arm at home, odometry at zero."""
         with self.lock:
@@ -99,9 +106,7 @@ class Simulation:
             self.gripper_goal = g.max_opening
             self.data.qpos[g.qpos] = g.joint_values(self.gripper_goal)
             self.data.eq_active[:] = 0
-            self.arm.q_ref = home.copy()
-            self.arm.mode, self.arm.fault = "idle", ""
-            self.arm.hold()
+            self.arm.restart(home)
             if self.base is not None:
                 self.base.stop()
             if self.odom is not None:
@@ -110,32 +115,29 @@ class Simulation:
             mujoco.mj_forward(self.model, self.data)
 
     # ------------------------------------------------------------------ commands
-    def command_arm(self, cmd: m.ArmCommand) -> None:
-        """Raises CommandRejected (nothing changes) for a bad or forbidden command: BadCommand
-        for a value beyond a joint's limits or max speed, or not finite (refused, not clipped);
-        arming.NotReady for a command that continues a stream from before the last recovery."""
-        with self.lock:
-            q = self.data.qpos[self.scene.arm_qpos]
-            if not self.arming["arm"].admit(cmd.controller, self.time) and not self.estop \
-                    and self.arm.mode != "fault":
-                self.arm.check(cmd, q)   # a bad value is refused as such
-                raise self.arming["arm"].refusal("the arm")
-            self.arm.command(cmd, self.time, q_measured=q)
+    def command_arm(self, cmd: m.ArmCommand) -> bool:
+        """Obey an ArmCommand as an arm driver does (asibot.safety.guarded_arm): ValueError or
+        CommandRefused (nothing changes) for a bad command, a value beyond a joint's limits or
+        max speed, or a stream from before the last recovery; False when ignored (the estop, a fault)."""
+        return self.arm.command(cmd.mode, list(cmd.values), list(cmd.velocities), cmd.controller)
 
-    def command_gripper(self, opening: float) -> None:
+    def command_gripper(self, opening: float, controller: str = "") -> bool:
+        """Open the fingers to `opening` m (a wider one opens them fully); False when ignored
+        (the estop, a fault), as an arm driver's gripper."""
         if not math.isfinite(opening):
-            raise BadCommand("not_finite", "gripper opening is not finite; send metres between the fingers")
+            raise CommandRefused("not_finite", "gripper opening is not finite; send metres between the fingers")
         with self.lock:
-            if self.estop:
-                raise CommandRejected("the emergency stop is engaged; release it before using the gripper")
+            if not self.arm._may_move(controller, self.time, "the gripper"):
+                return False
             self.gripper_goal = float(np.clip(opening, 0.0, self.scene.gripper.max_opening))
+            return True
 
     def command_base(self, vx: float, wz: float, controller: str = "") -> bool:
         """As command_arm, for a Twist of `controller` (asibot.safety.guarded_base's rules);
         False when it is ignored (the estop)."""
         with self.lock:
             if self.base is None:
-                raise BadCommand("no_base", f"{self.robot.robot_id} has no mobile base")
+                raise CommandRefused("no_base", f"{self.robot.robot_id} has no mobile base")
             return self.base.command(vx, wz, controller)
 
     def heard(self, part: str, controller: str) -> None:
@@ -146,54 +148,28 @@ class Simulation:
 
     def set_estop(self, engaged: bool, reason: str = "", by: str = "") -> None:
         with self.lock:
-            released = self.estop and not engaged
-            self.estop = engaged
-            stopped = ("the base is stopped, the arm holds its position, and both ignore motion commands until "
-                       "the stop is released") if self.base else \
-                "the arm holds its position and ignores motion commands until it is released"
-            self.arm.set_estop(engaged, reason, stopped, by)
+            released = self.arm.estop and not engaged
+            self.arm.set_estop(engaged, reason, by)     # its Event says it for the base too
             if self.base:
-                self.base.latch(engaged)           # the arm's event says it for both
-            if released:
-                for part in self._parts():
-                    self._recovered(part, "the emergency stop was released" + (f" by {by}" if by else ""))
+                self.base.latch(engaged)
+                if released:
+                    self.base.recovered("the emergency stop was released" + (f" by {by}" if by else ""))
 
     def set_controller(self, part: str, holder: str | None) -> None:
         """The controller that holds `part` ("arm", "base") changed (asibot.safety.ownership): stop the
         part if it is moving, and re-arm it for the new holder, if any."""
         with self.lock:
-            if part == "arm" and (np.any(np.abs(self.data.qvel[self.scene.arm_dof]) > 1e-3)
-                                  or self.arm.mode == "velocity"):
-                self.arm.hold()
-                self.notices.put(Notice("warning", "controller_lost",
-                                        "The controller of the arm changed or disappeared; the arm stopped."))
-            if part == "base" and self.base is not None:
+            if part == "arm":
+                self.arm.set_controller(holder)
+            elif self.base is not None:
                 self.base.set_controller(holder)
-                return
-            if holder is None:
-                self.arming[part].disarm("its controller disappeared")
-            else:
-                self._recovered(part, f"controller {holder!r} took hold of it")
 
-    def reset_fault(self) -> None:
-        with self.lock:
-            self.arm.reset_fault(self.data.qpos[self.scene.arm_qpos])
-            self._recovered("arm", "the fault was reset")
+    def reset_fault(self) -> dict:
+        """Clear the arm's fault (asibot.safety.guarded_arm.FaultError when it cannot)."""
+        return self.arm.reset_fault()
 
     def _notice(self, level: str, code: str, text: str) -> None:
         self.notices.put(Notice(level, code, text))
-
-    def _parts(self) -> tuple[str, ...]:
-        return ("arm", "base") if self.base else ("arm",)
-
-    def _recovered(self, part: str, why: str) -> None:
-        """Under the lock: after a recovery only a new stream moves `part`; say it is ready
-        (the base's GuardedBase says it in its own words)."""
-        if part == "base" and self.base is not None:
-            self.base.recovered(why)
-            return
-        self.arming[part].disarm(why)
-        self.notices.put(Notice("info", "ready", self.arming[part].ready_text(f"The {part}")))
 
     def set_object_pose(self, name: str, pos: list[float], quat: list[float] | None = None) -> None:
         """Teleport a free object (tests, demos); releases it from the gripper first."""
@@ -237,7 +213,7 @@ class Simulation:
     def _step_once(self) -> None:
         d, s, dt = self.data, self.scene, self.dt
         now = d.time
-        d.ctrl[s.arm_actuators] = self.arm.step(d.qpos[s.arm_qpos], dt, now)
+        d.ctrl[s.arm_actuators] = self.arm.step(d.qpos[s.arm_qpos], now)
         d.ctrl[s.gripper.actuators] = s.gripper.joint_values(self.gripper_goal)
         vx = wz = 0.0
         if self.base:

@@ -7,7 +7,7 @@ import re
 
 import pytest
 
-from asibot.arm_driver.motion import POSITION_TOLERANCE_RAD, VELOCITY_TOLERANCE, JointReference
+from asibot.safety.joint_reference import POSITION_TOLERANCE_RAD, VELOCITY_TOLERANCE, JointReference
 from asibot.safety.events import CommandRefused
 
 V = math.radians(25)

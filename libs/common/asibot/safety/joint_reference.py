@@ -21,6 +21,7 @@ Tolerances, for numerical noise only (values within them are clamped, not refuse
 from __future__ import annotations
 
 import math
+from typing import Protocol
 
 from asibot.safety.events import CommandRefused, quantity
 from asibot.safety.watchdog import Watchdog
@@ -95,14 +96,10 @@ class JointReference:
         """Raise ValueError (CommandRefused for a value past a limit) if this command may not
         be obeyed; changes nothing."""
         self._check(values)
-        if mode == "velocity":
-            self._within_speeds(values, "velocity")
-            return
         if feed_forward:
             self._check(feed_forward)
-        self._within_limits(values, measured)
-        if feed_forward:
-            self._within_speeds(feed_forward, "velocity feed-forward")
+        here = [list(self.target)] + ([list(measured)] if measured is not None and len(measured) == self.n else [])
+        check_limits(self, mode, values, feed_forward or [], here)
 
     @property
     def streaming(self) -> bool:
@@ -139,20 +136,45 @@ class JointReference:
             if not math.isfinite(v):
                 raise CommandRefused("not_finite", f"joint {name} got {quantity(v)}, not a finite number")
 
-    def _within_limits(self, values: list[float], measured: list[float] | None) -> None:
-        here = [list(self.target)] + ([list(measured)] if measured and len(measured) == self.n else [])
-        for i, v in enumerate(values):
-            lo, hi = self.lower[i], self.upper[i]
-            now_at = [h[i] for h in here if math.isfinite(h[i])]
-            if v > max([hi] + now_at) + POSITION_TOLERANCE_RAD:
-                raise CommandRefused("position_limit", f"joint {self.names[i]} position {quantity(v, 'rad', hi)} "
-                                                       f"is beyond its upper limit {quantity(hi, 'rad', v)}")
-            if v < min([lo] + now_at) - POSITION_TOLERANCE_RAD:
-                raise CommandRefused("position_limit", f"joint {self.names[i]} position {quantity(v, 'rad', lo)} "
-                                                       f"is beyond its lower limit {quantity(lo, 'rad', v)}")
 
-    def _within_speeds(self, values: list[float], what: str) -> None:
-        for name, v, m in zip(self.names, values, self.vmax):
-            if abs(v) > m * (1.0 + VELOCITY_TOLERANCE):
-                raise CommandRefused("speed_limit", f"joint {name} {what} {quantity(v, 'rad/s', m)} is beyond "
-                                                    f"its max speed {quantity(m, 'rad/s', abs(v))}")
+class Limits(Protocol):
+    """An arm's joints and their limits (rad, rad/s), one value per joint."""
+
+    names: list[str]
+    lower: list[float]
+    upper: list[float]
+    vmax: list[float]
+
+
+def check_limits(arm: Limits, mode: str, values: list[float], feed_forward: list[float],
+                 here: list[list[float]]) -> None:
+    """Raise CommandRefused if a command ("position" with an optional velocity feed-forward, or
+    "velocity") has a value that is not finite or beyond a limit (see the module's tolerances);
+    `here` are where the joints are now (the set-point, and the measured positions if known):
+    a joint found outside its limits may be told to stay or come back, never to go further out.
+    Every arm driver refuses in these words."""
+    for vector in (values, feed_forward):
+        for name, v in zip(arm.names, vector):
+            if not math.isfinite(v):
+                raise CommandRefused("not_finite", f"joint {name} got {quantity(v)}, not a finite number")
+    if mode == "velocity":
+        _within_speeds(arm, values, "velocity")
+        return
+    for i, v in enumerate(values):
+        lo, hi = arm.lower[i], arm.upper[i]
+        now_at = [h[i] for h in here if math.isfinite(h[i])]
+        if v > max([hi] + now_at) + POSITION_TOLERANCE_RAD:
+            raise CommandRefused("position_limit", f"joint {arm.names[i]} position {quantity(v, 'rad', hi)} "
+                                                   f"is beyond its upper limit {quantity(hi, 'rad', v)}")
+        if v < min([lo] + now_at) - POSITION_TOLERANCE_RAD:
+            raise CommandRefused("position_limit", f"joint {arm.names[i]} position {quantity(v, 'rad', lo)} "
+                                                   f"is beyond its lower limit {quantity(lo, 'rad', v)}")
+    if feed_forward:
+        _within_speeds(arm, feed_forward, "velocity feed-forward")
+
+
+def _within_speeds(arm: Limits, values: list[float], what: str) -> None:
+    for name, v, m in zip(arm.names, values, arm.vmax):
+        if abs(v) > m * (1.0 + VELOCITY_TOLERANCE):
+            raise CommandRefused("speed_limit", f"joint {name} {what} {quantity(v, 'rad/s', m)} is beyond "
+                                                f"its max speed {quantity(m, 'rad/s', abs(v))}")
