@@ -123,12 +123,13 @@ class SimArm(GuardedArm):
         if self._faulted:
             return self.ref.target
         target = self.ref.step(now)
-        self._check_following(np.asarray(q_measured, float), now)
+        self._check_following(target, q_measured, now)
         return target
 
-    def _check_following(self, q: np.ndarray, now: float) -> None:
-        err = np.abs(self.q_ref - q)
-        if float(err.max()) <= FOLLOWING_ERROR_RAD:
+    def _check_following(self, target: list[float], q: Sequence[float], now: float) -> None:
+        # Plain floats: 500 times a second, on a handful of joints, faster than numpy.
+        err = [abs(t - float(v)) for t, v in zip(target, q)]
+        if max(err) <= FOLLOWING_ERROR_RAD:
             self._lag_since = None
             return
         if self._lag_since is None:
@@ -136,10 +137,10 @@ class SimArm(GuardedArm):
             return
         if now - self._lag_since <= FOLLOWING_ERROR_TIME_S:
             return
-        j = int(err.argmax())
+        j = err.index(max(err))
         self.fault = (f"joint {self.limits.names[j]} cannot follow its command "
                       f"({math.degrees(err[j]):.0f} deg behind); clear the obstacle and reset the fault")
         self._faulted = True
         self.counters["faults"] += 1
-        self.ref.reset(np.clip(q, self.limits.lower, self.limits.upper).tolist())   # hold where it is stuck
+        self.ref.reset(np.clip(np.asarray(q, float), self.limits.lower, self.limits.upper).tolist())   # hold there
         self.on_event("error", "following_error", f"Arm fault: {self.fault}.")
