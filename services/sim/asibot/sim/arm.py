@@ -68,6 +68,7 @@ class SimArm(GuardedArm):
         self._measured = measured
         self.ref = JointReference(limits.lower.tolist(), limits.upper.tolist(), limits.max_velocity.tolist(),
                                   dt, limits.names)
+        self.watchdog = self.ref.watchdog     # one watchdog: the set-points', which their feed-forward reads
         self.fault = ""
         self._lag_since: float | None = None
         self.restart(home)
@@ -91,7 +92,6 @@ class SimArm(GuardedArm):
     # ------------------------------------------------------------------ GuardedArm's parts
     def _hold(self) -> None:
         self.ref.hold()
-        self.watchdog.fired = True         # already stopped: nothing left for the watchdog to do
 
     def _moving(self) -> bool:
         return self.ref.moving
