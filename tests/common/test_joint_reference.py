@@ -76,12 +76,13 @@ def test_velocities_beyond_the_max_speed_are_refused(speed):
 
 
 def test_velocity_integrates_and_the_watchdog_stops_it():
+    """The stream's watchdog fires after a quiet period (GuardedArm._watch asks it), then a hold stops it."""
     r = ref()
     r.velocity([V * (1 + VELOCITY_TOLERANCE / 2), -0.1], now=0.0)      # a hair over: clamped to 25 deg/s
     r.step(0.01)
     assert r.rate == pytest.approx([V, -0.1])
-    assert not r.watchdog_expired(0.19)
-    assert r.watchdog_expired(0.21)
+    assert not r.watchdog.fires(0.19, r.streaming)
+    assert r.watchdog.fires(0.21, r.streaming)
     r.hold()
     before = r.target
     assert r.step(0.22) == before and not r.moving

@@ -106,10 +106,6 @@ class JointReference:
         """Whether a velocity command moves the arm: what the watchdog stops when it goes quiet."""
         return self.mode == "velocity" and any(self._velocity)
 
-    def watchdog_expired(self, now: float) -> bool:
-        """True once a velocity command is older than the watchdog period while it still moves the arm."""
-        return self.streaming and self.watchdog.silent(now)
-
     def step(self, now: float) -> list[float]:
         """Advance one period; returns the new set-points (rad)."""
         dt = self.period
