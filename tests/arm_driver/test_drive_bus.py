@@ -92,10 +92,11 @@ def test_a_drive_quick_stops_by_itself_when_the_master_dies(rig):
     drops its periodic frames with its socket): each drive quick-stops after its consumer time."""
     m = rig.master
     m.start_cyclic()
-    for node in rig.cfg.nodes:
-        m.configure(node)
-        m.start(node)
-        m.enable(node)
+    with m.bringing_up():       # no control loop runs here: its guard must not stop the heartbeat meanwhile
+        for node in rig.cfg.nodes:
+            m.configure(node)
+            m.start(node)
+            m.enable(node)
     # Monitoring starts with the first heartbeat heard after the consumer is configured.
     configured = max(t for cob, _, t in rig.sniffer.seen() if cob == 0x585)
     wait_until(lambda: [t for cob, _, t in rig.sniffer.seen() if cob == MASTER_HEARTBEAT and t > configured], 2)
@@ -160,9 +161,10 @@ def test_the_emulated_drive_follows_its_connection_loss_option(rig, option, stat
     m = rig.master
     m.config = dataclasses.replace(m.config, connection_loss=option)
     m.start_cyclic()
-    m.configure(1)
-    m.start(1)
-    m.enable(1)
+    with m.bringing_up():       # no control loop runs here: its guard must not stop the heartbeat meanwhile
+        m.configure(1)
+        m.start(1)
+        m.enable(1)
     wait_until(lambda: [cob for cob, _, _ in rig.sniffer.seen() if cob == MASTER_HEARTBEAT], 2)
     m.stop_cyclic()
     wait_until(lambda: rig.emu.states()[1] == state, 3, message=lambda: f"drive 1: {rig.emu.states()[1]}")
