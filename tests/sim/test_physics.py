@@ -223,7 +223,7 @@ def test_losing_the_controller_stops_a_moving_arm(kitchen):
 
 
 def test_a_fault_is_reported_and_reset(kitchen):
-    kitchen.arm.fault, kitchen.arm._faulted = "joint q2 cannot follow its command", True
+    kitchen.arm.fail("following_error", "joint q2 cannot follow its command", kitchen.arm_state().positions)
     assert kitchen.command_arm(ArmCommand(mode="position", values=[0.1, 0, 0, 0, 0])) is False   # ignored
     assert kitchen.arm_state().mode == "fault" and kitchen.arm_state().fault
     assert kitchen.reset_fault() == {}

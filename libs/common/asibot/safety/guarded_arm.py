@@ -184,6 +184,13 @@ class GuardedArm(abc.ABC):
             raise FaultError(str(outcome))
         return outcome
 
+    def admits(self, controller: str, what: str) -> bool:
+        """Whether a checked command of `controller` for `what` ("the gripper") moves it now, by
+        the arm's rules (`_may_move`): False under the estop or a fault; arming's NotReady for a
+        stream from before a recovery."""
+        with self._lock:
+            return self._may_move(controller, self.clock(), what)
+
     # ------------------------------------------------------------ for the driver
     def _wait_for_reset(self, done: threading.Event, timeout: float) -> None:
         """Until the control thread has served the reset asked for (`_serve_reset`)."""

@@ -105,7 +105,7 @@ class KatanaDriver(GuardedArm):
             raise CommandRefused("position_limit", f"gripper opening {quantity(opening, 'm')} is outside "
                                                    f"0..{top:g} m")
         with self._lock:
-            if not self._may_move(controller, time.monotonic(), "the gripper"):
+            if not self.admits(controller, "the gripper"):
                 return False
             self._gripper_command = opening
             self._gripper_goal = gripper_counts(opening, top, self.gripper)

@@ -138,9 +138,14 @@ class SimArm(GuardedArm):
         if now - self._lag_since <= FOLLOWING_ERROR_TIME_S:
             return
         j = err.index(max(err))
-        self.fault = (f"joint {self.limits.names[j]} cannot follow its command "
-                      f"({math.degrees(err[j]):.0f} deg behind); clear the obstacle and reset the fault")
-        self._faulted = True
-        self.counters["faults"] += 1
-        self.ref.reset(np.clip(np.asarray(q, float), self.limits.lower, self.limits.upper).tolist())   # hold there
-        self.on_event("error", "following_error", f"Arm fault: {self.fault}.")
+        self.fail("following_error", f"joint {self.limits.names[j]} cannot follow its command "
+                                     f"({math.degrees(err[j]):.0f} deg behind); clear the obstacle and reset the fault", q)
+
+    def fail(self, code: str, fault: str, q: Sequence[float]) -> None:
+        """The arm faults, as a drive does by itself: it holds at `q` (where it stands), ignores
+        commands until a fault reset, and says `fault` once (Event `code`)."""
+        with self._lock:
+            self.fault, self._faulted = fault, True
+            self.counters["faults"] += 1
+            self.ref.reset(np.clip(np.asarray(q, float), self.limits.lower, self.limits.upper).tolist())
+        self.on_event("error", code, f"Arm fault: {fault}.")

@@ -127,7 +127,7 @@ class Simulation:
         if not math.isfinite(opening):
             raise CommandRefused("not_finite", "gripper opening is not finite; send metres between the fingers")
         with self.lock:
-            if not self.arm._may_move(controller, self.time, "the gripper"):
+            if not self.arm.admits(controller, "the gripper"):
                 return False
             self.gripper_goal = float(np.clip(opening, 0.0, self.scene.gripper.max_opening))
             return True
