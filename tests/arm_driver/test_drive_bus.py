@@ -165,7 +165,9 @@ def test_the_emulated_drive_follows_its_connection_loss_option(rig, option, stat
         m.configure(1)
         m.start(1)
         m.enable(1)
-    wait_until(lambda: [cob for cob, _, _ in rig.sniffer.seen() if cob == MASTER_HEARTBEAT], 2)
+    # Monitoring starts with the first heartbeat heard after the consumer is configured (CiA 301).
+    configured = max(t for cob, _, t in rig.sniffer.seen() if cob == 0x581)
+    wait_until(lambda: [t for cob, _, t in rig.sniffer.seen() if cob == MASTER_HEARTBEAT and t > configured], 2)
     m.stop_cyclic()
     wait_until(lambda: rig.emu.states()[1] == state, 3, message=lambda: f"drive 1: {rig.emu.states()[1]}")
 
