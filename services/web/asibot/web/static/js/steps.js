@@ -85,7 +85,10 @@ export function stepsEditor({ onSaved, showPython }) {
       problem.textContent = e.message;
       problem.hidden = false;
     }
-    draw();
+    // A redraw would replace a step's field while it is typed in, and lose what was typed:
+    // then only the sentences are brought up to date (the field's change describes it again).
+    const typing = list.contains(document.activeElement) && document.activeElement.matches('input, select, textarea');
+    if (typing) sayAgain(steps, described, []); else draw();
   };
   const changed = () => { dirty = true; draw(); preview(); };
 
@@ -210,14 +213,23 @@ export function stepsEditor({ onSaved, showPython }) {
     box.append(focusable(`${number(path)}:done`, el('button', { type: 'button', onclick: () => { editing = null; focusKey = `${number(path)}:edit`; draw(); } }, 'Done')));
     return box;
   };
+  // What row `n` says: the server's sentence, or the page's own while it has none.
+  const sentence = (n, step, said) => [el('span', { class: 'step-number' }, `${n}.`), ' ', said ? said.sentence : plain(step)];
+  const sayAgain = (items, sentences, prefix) => items.forEach((step, i) => {
+    const path = [...prefix, i];
+    const n = number(path);
+    const said = sentences ? sentences[i] : null;
+    list.querySelector(`[data-focus="${n}:row"]`)?.replaceChildren(...sentence(n, step, said));
+    if (step.kind === 'repeat') sayAgain(step.steps, said ? said.steps : null, path);
+  });
   const rows = (items, sentences, prefix) => items.map((step, i) => {
     const path = [...prefix, i];
     const n = number(path);
-    const said = sentences && sentences[i] ? sentences[i].sentence : plain(step);
+    const said = sentences ? sentences[i] : null;
     const count = items.length;
     const li = el('li', { class: `step step-${step.kind}`, dataset: { step: n } },
       el('div', { class: 'row' },
-        focusable(`${n}:row`, el('span', { class: 'step-sentence', tabindex: '-1' }, el('span', { class: 'step-number' }, `${n}.`), ' ', said)),
+        focusable(`${n}:row`, el('span', { class: 'step-sentence', tabindex: '-1' }, ...sentence(n, step, said))),
         el('span', { class: 'step-buttons' },
           focusable(`${n}:edit`, el('button', { type: 'button', 'aria-label': `Edit step ${n}`, 'aria-expanded': String(samePath(editing, path)),
             onclick: () => { editing = samePath(editing, path) ? null : path; focusKey = `${n}:edit`; draw(); } }, 'Edit')),
@@ -231,7 +243,7 @@ export function stepsEditor({ onSaved, showPython }) {
       samePath(editing, path) ? fields(step, path) : null);
     if (step.kind === 'repeat') {
       li.append(el('ol', { class: 'steps inner', 'aria-label': `Steps inside step ${n}` },
-        ...rows(step.steps, sentences && sentences[i] ? sentences[i].steps : null, path)));
+        ...rows(step.steps, said ? said.steps : null, path)));
     }
     return li;
   });
