@@ -31,6 +31,7 @@ from typing import Callable
 
 from asibot.safety.arming import Arming
 from asibot.safety.events import estop_said
+from asibot.safety.joint_reference import JointReference
 from asibot.safety.watchdog import Watchdog
 
 EventSink = Callable[[str, str, str], None]      # level, code, text
@@ -249,3 +250,34 @@ class GuardedArm(abc.ABC):
             if not result:                 # a bug: the caller hears so, the control thread logs it
                 result.append(FaultError("The fault reset hit an internal error; see the driver's log."))
             done.set()
+
+
+class ReferencedArm(GuardedArm):
+    """A GuardedArm whose motors follow a JointReference's set-points (asibot.safety.joint_reference):
+    the CANopen driver's drives in cyclic synchronous position, the sim's servos. It sets `ref`,
+    and gives `_measured` (where the joints are, rad, or None before they report), `_reset` and
+    how its motors are driven."""
+
+    ref: JointReference
+
+    @abc.abstractmethod
+    def _measured(self) -> list[float] | None:
+        """Where the joints are now (rad); None while not every joint has reported."""
+
+    def _check_limits(self, mode: str, values: list[float], velocities: list[float]) -> None:
+        self.ref.check(mode, values, velocities, self._measured())
+
+    def _apply(self, mode: str, values: list[float], velocities: list[float], now: float) -> None:
+        if mode == "position":
+            self.ref.position(values, velocities, now, self._measured())
+        else:
+            self.ref.velocity(values, now)
+
+    def _hold(self) -> None:
+        self.ref.hold()
+
+    def _moving(self) -> bool:
+        return self.ref.moving
+
+    def _streaming(self) -> bool:
+        return self.ref.streaming

@@ -23,7 +23,7 @@ from asibot.arm_driver.config import ArmConfig
 from asibot.arm_driver.master import CanopenMaster, DriveError, Feedback, LoopStalled
 from asibot.safety.joint_reference import JointReference
 from asibot.messages import ArmState
-from asibot.safety.guarded_arm import EventSink, FaultError, GuardedArm
+from asibot.safety.guarded_arm import EventSink, FaultError, ReferencedArm
 from asibot.timing import Ticker
 
 log = logging.getLogger(__name__)
@@ -34,7 +34,7 @@ MODE_NAMES = {objects.MODE_CSP: "cyclic synchronous position", objects.MODE_PROF
 __all__ = ["ArmDriver", "FaultError"]
 
 
-class ArmDriver(GuardedArm):
+class ArmDriver(ReferencedArm):
     """Drives the arm described by `config` through `master`."""
 
     arm = "the ASIBOT"
@@ -80,24 +80,6 @@ class ArmDriver(GuardedArm):
         fb = self._feedback
         return [j.units.to_rad(fb[j.node].position) for j in self.joints] if all(j.node in fb for j in self.joints) \
             else None
-
-    def _check_limits(self, mode: str, values: list[float], velocities: list[float]) -> None:
-        self.ref.check(mode, values, velocities, self._measured())
-
-    def _apply(self, mode: str, values: list[float], velocities: list[float], now: float) -> None:
-        if mode == "position":
-            self.ref.position(values, velocities, now, self._measured())
-        else:
-            self.ref.velocity(values, now)
-
-    def _hold(self) -> None:
-        self.ref.hold()
-
-    def _moving(self) -> bool:
-        return self.ref.moving
-
-    def _streaming(self) -> bool:
-        return self.ref.streaming
 
     # ------------------------------------------------------------ state (any thread)
     def status(self) -> dict:

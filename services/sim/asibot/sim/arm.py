@@ -19,7 +19,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from asibot.safety.guarded_arm import EventSink, GuardedArm
+from asibot.safety.guarded_arm import EventSink, ReferencedArm
 from asibot.safety.joint_reference import JointReference
 
 FOLLOWING_ERROR_RAD = 0.25
@@ -49,7 +49,7 @@ class JointLimits:
                    np.asarray(max_velocity, float))
 
 
-class SimArm(GuardedArm):
+class SimArm(ReferencedArm):
     """One simulated arm: commands in (GuardedArm.command), a set-point per physics step out (`step`).
 
     `measured()` is where the joints are (rad); `clock()` the simulated time; `lock` the
@@ -65,7 +65,7 @@ class SimArm(GuardedArm):
         if held is not None:
             self.held = held
         self.limits = limits
-        self._measured = measured
+        self._where = measured
         self.ref = JointReference(limits.lower.tolist(), limits.upper.tolist(), limits.max_velocity.tolist(),
                                   dt, limits.names)
         self.watchdog = self.ref.watchdog     # one watchdog: the set-points', which their feed-forward reads
@@ -89,24 +89,9 @@ class SimArm(GuardedArm):
         """The set-point the servos follow (rad)."""
         return np.asarray(self.ref.target)
 
-    # ------------------------------------------------------------------ GuardedArm's parts
-    def _hold(self) -> None:
-        self.ref.hold()
-
-    def _moving(self) -> bool:
-        return self.ref.moving
-
-    def _streaming(self) -> bool:
-        return self.ref.streaming
-
-    def _check_limits(self, mode: str, values: list[float], velocities: list[float]) -> None:
-        self.ref.check(mode, values, velocities, list(self._measured()))
-
-    def _apply(self, mode: str, values: list[float], velocities: list[float], now: float) -> None:
-        if mode == "position":
-            self.ref.position(values, velocities, now, list(self._measured()))
-        else:
-            self.ref.velocity(values, now)
+    # ------------------------------------------------------------------ ReferencedArm's parts
+    def _measured(self) -> list[float]:
+        return [float(q) for q in self._where()]
 
     def _reset(self) -> dict:
         self.restart(self._measured())
