@@ -40,8 +40,17 @@ NAME = "recorder"
 PROFILE = "asibot"
 ENCODING = "msgpack"
 DEFAULT_MAX_FILE_BYTES = 500_000_000
+RING = 1 << 17
+"""Samples that may wait for the recorder; past that the oldest are dropped. A burst of 200,000
+small messages from one process (bench/bench_bus.py) arrives faster than they are written
+and left about 75,000 waiting; a waiting small sample costs about 350 bytes (46 MB for a
+full ring)."""
 PRUNE_PERIOD_S = 60.0
 """How often the folder is checked against the limits, besides at start and at each new part."""
+
+
+_WRITE, _THIN, _SKIP = object(), object(), object()
+"""What the recorder does with a key's samples: write each, thin them (camera images), skip them."""
 
 
 def session_name(now: dt.datetime | None = None, label: str = "") -> str:
@@ -71,10 +80,11 @@ class McapRecorder:
                                          name="mcap-flush", daemon=True)
         self._flusher.start()
 
-    def write(self, key: str, payload: bytes, log_time_ns: int, publish_time_ns: int | None = None) -> None:
+    def write(self, key: str, payload: bytes, log_time_ns: int, publish_time_ns: int | None = None) -> int:
+        """Add one message; returns `size` (0 once closed), which Session checks after each."""
         with self._lock:
             if self._closed:
-                return
+                return 0
             channel = self._channels.get(key)
             if channel is None:
                 # The type of the first message names the channel's, so a listing reads no message.
@@ -85,6 +95,7 @@ class McapRecorder:
                                      sequence=self.count & 0xFFFFFFFF)
             self.count += 1
             self._dirty = True
+            return self._writer.size
 
     @property
     def size(self) -> int:
@@ -151,8 +162,7 @@ class Session:
         return self._earlier + self.recorder.count
 
     def write(self, key: str, payload: bytes, log_time_ns: int) -> None:
-        self.recorder.write(key, payload, log_time_ns)
-        if self.max_file_bytes and self.recorder.size >= self.max_file_bytes:
+        if self.recorder.write(key, payload, log_time_ns) >= self.max_file_bytes > 0:
             self._next_part()
 
     def _next_part(self) -> None:
@@ -191,7 +201,7 @@ class RecorderService(runtime.Service):
         self.retention = retention
         self.directory = Path(directory)
         self.exclude = list(exclude or [])
-        self._excluded: dict[str, bool] = {}  # per key, decided once: fnmatch costs ~1 us a pattern
+        self._routes: dict[str, object] = {}  # key -> _WRITE, _THIN or _SKIP
         self.skipped = 0
         self.removed = 0
         self._prune_now = threading.Event()
@@ -199,20 +209,25 @@ class RecorderService(runtime.Service):
         self.recorder = Session(self.directory, label, max_file_bytes, on_new_part=lambda p: self._prune_now.set())
         self._pruner = threading.Thread(target=self._prune_loop, name="recordings-rotation", daemon=True)
         self._pruner.start()
-        self._sub = bus.subscribe_raw(keys.EVERYTHING, self._on_sample, maxsize=1 << 16)
+        self._sub = bus.subscribe_raw(keys.EVERYTHING, self._on_sample, maxsize=RING)
         log.info("recording to %s (camera images at %s, folder kept within %s)", self.recorder.path,
                  f"{camera_hz:g} Hz" if camera_hz else "every frame", describe(retention))
 
     def _on_sample(self, key: str, payload: bytes, t_ns: int) -> None:
-        excluded = self._excluded.get(key)
-        if excluded is None:
-            excluded = self._excluded[key] = any(fnmatch.fnmatchcase(key, p) for p in self.exclude)
-        if excluded:
+        # Every sample of the stack passes here: one dict lookup decides what a key gets.
+        route = self._routes.get(key)
+        if route is None:
+            route = self._routes[key] = self._route(key)
+        if route is _WRITE or (route is _THIN and self.thinner.keep_frame(key, t_ns)):
+            self.recorder.write(key, payload, t_ns)
+        elif route is _SKIP:
             self.skipped += 1
-            return
-        if not self.thinner.keep(key, t_ns):
-            return
-        self.recorder.write(key, payload, t_ns)
+
+    def _route(self, key: str) -> object:
+        """What a key's samples get, decided once (fnmatch costs about 1 us a pattern)."""
+        if any(fnmatch.fnmatchcase(key, p) for p in self.exclude):
+            return _SKIP
+        return _THIN if self.thinner.thins(key) else _WRITE
 
     def _prune_loop(self) -> None:
         while not self._stop.is_set():

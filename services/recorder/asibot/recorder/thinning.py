@@ -34,16 +34,17 @@ class CameraThinner:
         self.period_ns = int(1e9 / hz) if hz > 0 else 0
         self.skipped = 0
         self._due: dict[str, int] = {}
-        self._images: dict[str, bool] = {}   # key -> is a camera image (decided once per key)
+
+    def thins(self, key: str) -> bool:
+        """Whether `keep` may drop frames of this key: a camera image, with a rate set."""
+        return bool(self.period_ns) and is_camera_image(key)
 
     def keep(self, key: str, t_ns: int) -> bool:
-        if not self.period_ns:
-            return True
-        image = self._images.get(key)
-        if image is None:
-            image = self._images[key] = is_camera_image(key)
-        if not image:
-            return True
+        """Whether to record this sample of any key."""
+        return not self.thins(key) or self.keep_frame(key, t_ns)
+
+    def keep_frame(self, key: str, t_ns: int) -> bool:
+        """Whether to record this frame of a key that `thins` (the recorder asks `thins` once a key)."""
         due = self._due.get(key)
         if due is not None and t_ns < due:
             self.skipped += 1
