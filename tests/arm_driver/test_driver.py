@@ -192,6 +192,31 @@ def test_bus_off_is_reported_and_stops_the_arm(rig):
     wait_until(lambda: rig.last.mode == "idle", 2)
 
 
+def test_a_drive_that_stopped_itself_during_a_bus_off_is_enabled_again_by_reset_fault(rig):
+    """The drives send their statusword when it changes; a change during a bus-off is lost with
+    its TPDO. Enabling must read the word, not trust the last one heard (here the drives have no
+    event timer, which would repeat the word within 250 ms)."""
+    d = up(rig)
+    for drive in rig.emu.drives.values():
+        for pdo in drive.tpdos.values():
+            pdo.event_timer_ms = 0
+    # Longer than the drives' heartbeat consumer time (300 ms): each drive quick-stops itself
+    # for the master's silence, and nobody hears it say so.
+    rig.emu.bus_off(0.6)
+    wait_until(lambda: rig.last.mode == "fault", 2)
+    wait_until(lambda: "operation enabled" not in rig.emu.states().values(), 2,
+               message=f"the drives stayed enabled: {rig.emu.states()}")
+    wait_until(lambda: not rig.emu._bus_off_until, 2)
+    assert rig.master.feedback[3].state.value == "operation enabled"     # what the master last heard
+    d.reset_fault()
+    wait_until(lambda: rig.last.mode == "idle", 2)
+    assert set(rig.emu.states().values()) == {"operation enabled"}
+    goal = [0.02, -0.02, 0.02, -0.02, 0.02]
+    d.command("position", goal)
+    wait_until(lambda: all(abs(rig.emu.positions()[n] - g) < 1e-4 for n, g in zip(range(1, 6), goal)), 5,
+               message=f"the joints did not reach {goal}: {rig.emu.positions()}")
+
+
 def test_an_adapter_that_refuses_to_send_is_a_fault(rig):
     d = up(rig)
 

@@ -44,13 +44,14 @@ def test_startup_of_node_1_is_byte_exact(rig):
     assert "2b 00 18 03 2c 01 00 00" in requests          # TPDO1 inhibit 30 ms = 300 x 100 us
     assert "2b 00 18 05 fa 00 00 00" in requests          # TPDO1 event timer 250 ms
     assert "23 02 16 01 20 00 7a 60" in requests          # RPDO3 carries 0x607A target position
-    assert requests[-8:] == [
+    assert requests[-9:] == [
         "2f c2 60 01 0a 00 00 00",   # interpolation period 10 ...
         "2f c2 60 02 fd 00 00 00",   # ... x 10^-3 s
         "2f 60 60 00 08 00 00 00",   # mode CSP
         "2b 17 10 00 64 00 00 00",   # heartbeat producer 100 ms
         "23 16 10 01 2c 01 7f 00",   # heartbeat consumer: node 127 (the master) within 300 ms
         "2b 07 60 00 03 00 00 00",   # abort connection option: quick stop
+        "40 41 60 00 00 00 00 00",   # read the statusword: the last TPDO's may be stale
         "40 64 60 00 00 00 00 00",   # read position actual before enabling ...
         "23 7a 60 00 00 00 00 00",   # ... and make it the target, so nothing jumps
     ]

@@ -486,6 +486,21 @@ class CanopenMaster:
                 self._changed.wait(left)
             return self.feedback[node].state
 
+    def _read_state(self, node: int) -> State:
+        """The drive's state from its statusword read by SDO, not from the last TPDO.
+
+        A drive sends its statusword when it changes (and on its event timer, if it has one). A
+        change during a bus-off is lost with its TPDO, so the last word received can still say
+        "operation enabled" of a drive that has since disabled itself; enabling on that word
+        would end at once and leave the drive off.
+        """
+        sw = self.read(node, objects.STATUSWORD)
+        with self._changed:
+            fb = self.feedback[node]
+            fb.statusword, fb.state = sw, cia402.state_of(sw)
+            self._changed.notify_all()
+            return fb.state
+
     def enable(self, node: int) -> int:
         """Walk the CiA 402 state machine to operation enabled, holding the current position.
 
@@ -493,7 +508,8 @@ class CanopenMaster:
         actual position so that the drive does not run to a stale target.
         """
         timeout = self.config.state_timeout_s
-        state = self.wait_state(node, set(State) - {State.NOT_READY_TO_SWITCH_ON}, timeout)
+        self.wait_state(node, set(State) - {State.NOT_READY_TO_SWITCH_ON}, timeout)
+        state = self._read_state(node)
         here = self.read(node, objects.POSITION_ACTUAL)
         self.write(node, objects.TARGET_POSITION, 0, here)
         if self.modes.get(node) == objects.MODE_CSP:
