@@ -35,6 +35,7 @@ def test_position_goal_is_reached_at_max_speed_and_stays_within_the_limits():
     ([1.0 + 2 * POSITION_TOLERANCE_RAD, 0.0], None, "joint q1 position 1.0002 rad is beyond its upper limit 1 rad"),
     ([0.0, 0.0], [0.0, -1e300], "joint q2 velocity feed-forward -1e+300 rad/s is beyond its max speed 0.436 rad/s"),
     ([math.inf, 0.0], None, "joint q1 got inf, not a finite number"),
+    ([0.0, 0.0], [0.0, math.nan], "joint q2 got nan, not a finite number"),     # abs(nan) > max is false
 ])
 def test_positions_past_a_limit_are_refused_not_clipped(values, ff, says):
     r = ref()

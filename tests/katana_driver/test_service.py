@@ -139,6 +139,9 @@ def test_a_collision_is_a_fault_and_reset_clears_it(katana):
     ({"mode": "torque", "values": [0.0] * 5}, "must be 'position' or 'velocity', got 'torque'"),
     ({"mode": "position", "values": [0.0] * 3}, "the Katana has 5 joints"),
     ({"mode": "position", "values": [math.nan, 1.0, 0.0, 0.0, 0.0]}, "not finite"),
+    # The message refuses it before the driver's limits (tests/common/test_joint_reference.py) would.
+    ({"mode": "position", "values": [0.0, 1.0, 0.0, 0.0, 0.0], "velocities": [0.0, 0.0, 0.0, 0.0, math.nan]},
+     "ArmCommand.velocities: contains a value that is not finite"),
 ])
 def test_bad_input_is_refused_with_a_sentence_and_changes_nothing(katana, payload, says):
     k = katana
