@@ -102,6 +102,36 @@ def test_pick_it_up_from_the_template_with_no_code_typed(page, kitchen):
     sim.reset_world()
 
 
+def test_what_is_typed_in_a_new_step_is_kept_when_the_description_comes_late(page, kitchen):
+    """Adding a step asks the server to describe the steps. An answer that came while the new
+    step's field was typed in redrew the list and threw the typing away (CI, stop 43): the
+    answer is held here until the typing is done."""
+    from playwright.sync_api import expect
+    held: list = []
+    holding = [True]
+    page.route("**/steps/preview", lambda route: held.append(route) if holding[0] else route.continue_())
+    page.evaluate("() => { location.hash = 'program'; }")
+    page.get_by_label("New program name").fill("late_answer")
+    page.get_by_role("button", name="New from steps").click()
+    page.get_by_role("heading", name="late_answer.py").wait_for(timeout=10000)
+    page.get_by_role("group", name="Add a step").get_by_role("button", name="Say", exact=True).click()
+    text = page.get_by_role("group", name="Step 1").get_by_label("Text")
+    text.click()
+    text.press("Control+a")
+    text.type("Here is your red can.")                 # typed, not yet changed: no Tab
+    wait_until(lambda: held, 5, message="adding the step asked for no description")
+    holding[0] = False
+    with page.expect_response("**/steps/preview"):
+        while held:
+            held.pop(0).continue_()
+    # The answer described the step as added; the field keeps what was typed, and the focus.
+    expect(text).to_have_value("Here is your red can.")
+    expect(text).to_be_focused()
+    text.press("Tab")
+    expect(page.get_by_role("list", name="Steps").locator(".step-sentence").first).to_have_text(
+        "1. Say “Here is your red can.”", timeout=10000)
+
+
 def test_the_steps_editor_with_one_switch(page, kitchen):
     """Every step is reachable by one switch (issue 27, point 3): a "Pick it up" program from a
     point, a Wait added at the end and moved up before the lift, saved; Space alone, step scanning."""
