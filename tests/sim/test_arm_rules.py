@@ -29,7 +29,7 @@ class Arm:
         self.at: list[float] | None = None     # where the joints are measured, if not at the set-point
         limits = JointLimits.of(["a", "b"], [-1.0, -2.0], [1.0, 2.0], [0.5, 1.0])
         self.arm = SimArm(limits, [0.0, 0.0], DT, lambda *e: self.events.append(e), clock=lambda: self.now,
-                          lock=threading.RLock(), measured=self.measured)
+                          lock=threading.RLock(), measured=self.measured, max_opening=0.08)
 
     def measured(self) -> list[float]:
         if self.at is not None:
@@ -159,3 +159,32 @@ def test_feedforward_extrapolates_a_little_but_never_past_limits():
     t.run(0.5)
     assert t.arm.q_ref[0] == pytest.approx(1.0)          # at most the horizon ahead, and never past the limit
     assert t.arm.q_ref[1] == pytest.approx(0.5 * 0.1)    # FEED_FORWARD_HORIZON_S (100 ms) ahead
+
+
+@pytest.mark.parametrize("opening, says", [
+    (0.09, "gripper opening 0.09 m is outside 0..0.08 m"),
+    (-0.01, "gripper opening -0.01 m is outside 0..0.08 m"),
+    (math.nan, "gripper opening nan is not a finite number"),
+])
+def test_a_gripper_opening_out_of_range_is_refused_as_the_katanas_is(opening, says):
+    t = Arm()
+    with pytest.raises(CommandRefused, match=re.escape(says)):
+        t.arm.command_gripper(opening, "kinematics")
+    assert t.arm.gripper_goal == 0.08                              # nothing changed: open
+
+
+def test_the_gripper_obeys_the_arms_rules_and_a_fault_reset_keeps_what_it_holds():
+    t = Arm()
+    assert t.arm.command_gripper(0.0, "kinematics") is True and t.arm.gripper_goal == 0.0
+    t.arm.set_estop(True, "button")
+    assert t.arm.command_gripper(0.08, "kinematics") is False     # ignored, as the joints are
+    assert t.arm.gripper_goal == 0.0
+    t.arm.set_estop(False)
+    t.now += COMMAND_WATCHDOG_S + DT                               # a new stream (asibot.safety.arming)
+    t.command("position", [0.9, 0.0])
+    t.stuck = True
+    t.run(2.0)
+    assert t.arm.mode == "fault"
+    t.stuck = False
+    t.arm.reset_fault()
+    assert t.arm.gripper_goal == 0.0                               # still closed: nothing held drops

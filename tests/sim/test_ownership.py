@@ -23,12 +23,12 @@ from .conftest import ROBOT
 def stays_still(sim, seconds: float, arm_tolerance: float = 1e-3) -> None:
     """The arm, the fingers and the base stay where they are, sampled throughout `seconds`."""
     here, x0 = list(sim.arm.last().positions), sim.svc.sim.truth()[0]
-    opening = sim.svc.sim.gripper_goal
+    opening = sim.svc.sim.arm.gripper_goal
     end = time.monotonic() + seconds
     while time.monotonic() < end:
         assert sim.arm.last().positions == pytest.approx(here, abs=arm_tolerance), "the arm moved"
         assert sim.svc.sim.truth()[0] == pytest.approx(x0, abs=1e-4), "the base moved"
-        assert sim.svc.sim.gripper_goal == opening, "the fingers were commanded"
+        assert sim.svc.sim.arm.gripper_goal == opening, "the fingers were commanded"
         time.sleep(0.02)
 
 

@@ -29,6 +29,7 @@ from asibot.safety.watchdog import Watchdog
 FEED_FORWARD_HORIZON_S = 0.1
 POSITION_TOLERANCE_RAD = 1e-4
 VELOCITY_TOLERANCE = 1e-3
+GRIPPER_TOLERANCE_M = 1e-6
 
 
 class JointReference:
@@ -167,6 +168,17 @@ def check_limits(arm: Limits, mode: str, values: list[float], feed_forward: list
                                                    f"is beyond its lower limit {quantity(lo, 'rad', v)}")
     if feed_forward:
         _within_speeds(arm, feed_forward, "velocity feed-forward")
+
+
+def check_gripper(opening: float, max_opening: float) -> None:
+    """Raise CommandRefused unless `opening` (m between the fingers) is a finite number within
+    0..max_opening; as for the joints, a value out of range is refused, never clipped. Every
+    arm driver's gripper refuses in these words."""
+    if not math.isfinite(opening):
+        raise CommandRefused("not_finite", f"gripper opening {quantity(opening)} is not a finite number")
+    if not -GRIPPER_TOLERANCE_M <= opening <= max_opening + GRIPPER_TOLERANCE_M:
+        raise CommandRefused("position_limit", f"gripper opening {quantity(opening, 'm')} is outside "
+                                               f"0..{max_opening:g} m")
 
 
 def _within_speeds(arm: Limits, values: list[float], what: str) -> None:

@@ -15,7 +15,6 @@ before moves nothing until it pauses (asibot.safety.arming).
 from __future__ import annotations
 
 import logging
-import math
 import threading
 import time
 from typing import Callable
@@ -24,9 +23,8 @@ from asibot.katana_driver import protocol as p
 from asibot.katana_driver.katana import Interrupted, Katana, MotorParams, Silent, gripper_counts, gripper_opening
 from asibot.messages import ArmState, GripperState
 from asibot.robots import RobotSpec
-from asibot.safety.events import CommandRefused, quantity
 from asibot.safety.guarded_arm import EventSink, FaultError, GuardedArm
-from asibot.safety.joint_reference import POSITION_TOLERANCE_RAD, check_limits
+from asibot.safety.joint_reference import POSITION_TOLERANCE_RAD, check_gripper, check_limits
 from asibot.timing import Ticker
 
 log = logging.getLogger(__name__)
@@ -99,11 +97,7 @@ class KatanaDriver(GuardedArm):
     def command_gripper(self, opening: float, controller: str = "") -> bool:
         """Open the fingers to `opening` m; CommandRefused outside 0..max opening."""
         top = self.spec.gripper_max_opening
-        if not math.isfinite(opening):
-            raise CommandRefused("not_finite", f"gripper opening {quantity(opening)} is not a finite number")
-        if not -1e-6 <= opening <= top + 1e-6:
-            raise CommandRefused("position_limit", f"gripper opening {quantity(opening, 'm')} is outside "
-                                                   f"0..{top:g} m")
+        check_gripper(opening, top)
         with self._lock:
             if not self.admits(controller, "the gripper"):
                 return False

@@ -20,7 +20,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from asibot.safety.guarded_arm import EventSink, ReferencedArm
-from asibot.safety.joint_reference import JointReference
+from asibot.safety.joint_reference import JointReference, check_gripper
 
 FOLLOWING_ERROR_RAD = 0.25
 FOLLOWING_ERROR_TIME_S = 0.5
@@ -50,7 +50,8 @@ class JointLimits:
 
 
 class SimArm(ReferencedArm):
-    """One simulated arm: commands in (GuardedArm.command), a set-point per physics step out (`step`).
+    """One simulated arm and its gripper: commands in (GuardedArm.command, `command_gripper`),
+    set-points per physics step out (`step`, `gripper_goal`).
 
     `measured()` is where the joints are (rad); `clock()` the simulated time; `lock` the
     physics step's, so that the thread holding it is the arm's control thread.
@@ -60,7 +61,7 @@ class SimArm(ReferencedArm):
 
     def __init__(self, limits: JointLimits, home: Sequence[float], dt: float, on_event: EventSink, *,
                  clock: Callable[[], float], lock: threading.RLock, measured: Callable[[], Sequence[float]],
-                 held: str | None = None) -> None:
+                 max_opening: float, held: str | None = None) -> None:
         super().__init__(limits.names, on_event, clock=clock, lock=lock)
         if held is not None:
             self.held = held
@@ -71,7 +72,20 @@ class SimArm(ReferencedArm):
         self.watchdog = self.ref.watchdog     # one watchdog: the set-points', which their feed-forward reads
         self.fault = ""
         self._lag_since: float | None = None
+        self.max_opening = max_opening
+        self.gripper_goal = max_opening
+        """The opening (m) the fingers' servos follow: a fault reset leaves it, so nothing held drops."""
         self.restart(home)
+
+    def command_gripper(self, opening: float, controller: str = "") -> bool:
+        """Open the fingers to `opening` m; CommandRefused outside 0..max_opening; False when
+        ignored (the estop, a fault), as an arm driver's gripper."""
+        check_gripper(opening, self.max_opening)
+        with self._lock:
+            if not self.admits(controller, "the gripper"):
+                return False
+            self.gripper_goal = min(max(opening, 0.0), self.max_opening)   # within the tolerance
+            return True
 
     def restart(self, q: Sequence[float]) -> None:
         """Stand still at `q` (clipped into the limits), no fault: the arm as it is switched on."""

@@ -68,8 +68,8 @@ class Simulation:
         held = ("the base is stopped, the arm holds its position, and both ignore motion commands until the "
                 "stop is released") if self.scene.base else None     # the arm's Event says it for both
         self.arm = SimArm(self.limits, self.robot.home, self._dt, self._notice, clock=lambda: self.time,
-                          lock=self.lock, measured=lambda: self.data.qpos[self.scene.arm_qpos], held=held)
-        self.gripper_goal = self.scene.gripper.max_opening
+                          lock=self.lock, measured=lambda: self.data.qpos[self.scene.arm_qpos],
+                          max_opening=self.scene.gripper.max_opening, held=held)
         self.base = BaseDrive(self._notice, clock=lambda: self.time) if self.scene.base else None
         self.odom = Odometer(noise=odom_noise, seed=seed) if self.scene.base else None
         self.battery = sensors.Battery()
@@ -103,8 +103,8 @@ class Simulation:
             home = np.clip(np.asarray(self.robot.home, float), self.limits.lower, self.limits.upper)
             self.data.qpos[self.scene.arm_qpos] = home
             g = self.scene.gripper
-            self.gripper_goal = g.max_opening
-            self.data.qpos[g.qpos] = g.joint_values(self.gripper_goal)
+            self.arm.gripper_goal = g.max_opening
+            self.data.qpos[g.qpos] = g.joint_values(g.max_opening)
             self.data.eq_active[:] = 0
             self.arm.restart(home)
             if self.base is not None:
@@ -122,15 +122,8 @@ class Simulation:
         return self.arm.command(cmd.mode, list(cmd.values), list(cmd.velocities), cmd.controller)
 
     def command_gripper(self, opening: float, controller: str = "") -> bool:
-        """Open the fingers to `opening` m (a wider one opens them fully); False when ignored
-        (the estop, a fault), as an arm driver's gripper."""
-        if not math.isfinite(opening):
-            raise CommandRefused("not_finite", "gripper opening is not finite; send metres between the fingers")
-        with self.lock:
-            if not self.arm.admits(controller, "the gripper"):
-                return False
-            self.gripper_goal = float(np.clip(opening, 0.0, self.scene.gripper.max_opening))
-            return True
+        """Open the fingers to `opening` m (SimArm.command_gripper: an arm driver's gripper)."""
+        return self.arm.command_gripper(opening, controller)
 
     def command_base(self, vx: float, wz: float, controller: str = "") -> bool:
         """As command_arm, for a Twist of `controller` (asibot.safety.guarded_base's rules);
@@ -214,7 +207,7 @@ class Simulation:
         d, s, dt = self.data, self.scene, self.dt
         now = d.time
         d.ctrl[s.arm_actuators] = self.arm.step(d.qpos[s.arm_qpos], now)
-        d.ctrl[s.gripper.actuators] = s.gripper.joint_values(self.gripper_goal)
+        d.ctrl[s.gripper.actuators] = s.gripper.joint_values(self.arm.gripper_goal)
         vx = wz = 0.0
         if self.base:
             vx, wz = self.base.step(dt, now)
@@ -269,10 +262,11 @@ class Simulation:
         d, s = self.data, self.scene
         opening = s.gripper.opening(d.qpos)
         held = [eq for (_, eq, _) in s.objects.values() if d.eq_active[eq]]
-        if held and self.gripper_goal > opening + GRIP_SLACK_M:
+        goal = self.arm.gripper_goal
+        if held and goal > opening + GRIP_SLACK_M:
             d.eq_active[held] = 0          # opening: let go
             return
-        if held or self.gripper_goal >= opening - GRIP_SLACK_M:
+        if held or goal >= opening - GRIP_SLACK_M:
             return
         nfingers = len(s.gripper.geoms)
         for body, fingers in self._touching().items():
