@@ -41,10 +41,12 @@ PROFILE = "asibot"
 ENCODING = "msgpack"
 DEFAULT_MAX_FILE_BYTES = 500_000_000
 RING = 1 << 17
-"""Samples that may wait for the recorder; past that the oldest are dropped. A burst of 200,000
-small messages from one process (bench/bench_bus.py) arrives faster than they are written
-and left about 75,000 waiting; a waiting small sample costs about 350 bytes (46 MB for a
-full ring)."""
+"""Samples that may wait for the recorder; past that the oldest are dropped. bench/bench_bus.py's
+burst of 200,000 small messages comes at about 480,000 a second and is written at about
+300,000, so about 75,000 wait at its end, more than the 65,536 of the ring before (which
+dropped some in 1 run of 5). A waiting small sample costs about 350 bytes (46 MB for a full
+ring, measured). The count bounds memory only for small messages: camera images, 1.2 MB
+each, would fill it only if the disk stopped for hours (they come 20 a second at most)."""
 PRUNE_PERIOD_S = 60.0
 """How often the folder is checked against the limits, besides at start and at each new part."""
 
