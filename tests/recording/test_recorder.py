@@ -1,8 +1,10 @@
 """Recording to MCAP, listing, replaying, and recovering a file whose writer was killed."""
 
+import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -124,6 +126,35 @@ def test_killed_recorder_file_is_recovered(router, tmp_path, capsys):
     assert not s.complete
     asibot(["recordings", str(tmp_path)])
     assert "recovered" in capsys.readouterr().out
+
+
+def test_messages_are_written_while_the_disk_is_slow_to_keep_them(tmp_path, monkeypatch):
+    """A slow disk can take a second over an fsync, and every sample of the stack waits for the
+    recorder's lock: the fsync is outside it."""
+    entered, release = threading.Event(), threading.Event()
+    fsync = os.fsync
+
+    def slow_fsync(fd: int) -> None:
+        entered.set()
+        release.wait(10)
+        fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", slow_fsync)
+    rec = McapRecorder(tmp_path / "slow.mcap", flush_period=3600)
+    payload = m.encode(m.Battery(volts=12.0))
+    rec.write("rb/slow/battery", payload, 1)
+    flusher = threading.Thread(target=rec.flush)
+    flusher.start()
+    assert entered.wait(5), "the flush never asked the disk"
+    written = threading.Event()
+    threading.Thread(target=lambda: (rec.write("rb/slow/battery", payload, 2), written.set())).start()
+    try:
+        assert written.wait(5), "a message waited for the disk"
+    finally:
+        release.set()
+        flusher.join(5)
+    rec.close()
+    assert [r.log_time for r in iter_messages(tmp_path / "slow.mcap")] == [1, 2]
 
 
 def test_recorder_never_overwrites(tmp_path):

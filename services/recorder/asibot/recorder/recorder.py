@@ -74,6 +74,9 @@ class McapRecorder:
         self._writer.start(profile=PROFILE, library="asibot recorder")
         self._channels: dict[str, int] = {}
         self._lock = threading.Lock()
+        # Held while the disk is asked to keep what was written (fsync), apart from `_lock`: an
+        # fsync can take a slow disk a second, and every sample of the stack waits for `_lock`.
+        self._syncing = threading.Lock()
         self._dirty = False
         self._closed = False
         self.count = 0
@@ -105,14 +108,16 @@ class McapRecorder:
         return self._writer.size
 
     def flush(self) -> None:
-        """Close the open chunk and push it to the disk."""
-        with self._lock:
-            if self._closed or not self._dirty:
-                return
-            self._writer.flush()  # closes the current chunk
-            self._file.flush()
+        """Close the open chunk and push it to the disk; messages are written meanwhile."""
+        with self._syncing:
+            with self._lock:
+                if self._closed or not self._dirty:
+                    return
+                self._writer.flush()  # closes the current chunk
+                self._file.flush()
+                self._dirty = False
+            # The file stays open: close() waits for `_syncing`.
             os.fsync(self._file.fileno())
-            self._dirty = False
 
     def _flush_loop(self, period: float) -> None:
         while not self._stop.wait(period):
@@ -124,7 +129,7 @@ class McapRecorder:
     def close(self) -> None:
         """Finish the file with its summary, so readers can seek; idempotent."""
         self._stop.set()
-        with self._lock:
+        with self._syncing, self._lock:
             if self._closed:
                 return
             self._closed = True
