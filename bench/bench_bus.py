@@ -141,8 +141,6 @@ def pubsub_raw(endpoint: str, size: int, n: int, read: str = "") -> list[float]:
     as the echo in raw-array mode."""
     s = zenoh.open(client_config(endpoint))
     got = threading.Event()
-    payload = bytes(size)
-    send = lambda: pub.put(payload)  # noqa: E731
     if read == "bytes":
         sub = s.declare_subscriber("bench/rawpong", lambda sample: (sample.payload.to_bytes(), got.set()))
         pub = s.declare_publisher("bench/rawping", express=True)
@@ -150,11 +148,15 @@ def pubsub_raw(endpoint: str, size: int, n: int, read: str = "") -> list[float]:
         sub = s.declare_subscriber("bench/arraypong", lambda sample: (
             np.frombuffer(sample.payload.to_bytes(), np.float32), got.set()))
         pub = s.declare_publisher("bench/arrayping", express=True)
-        depth = np.ones((size // 2048, 512), np.float32)
-        send = lambda: pub.put(depth.tobytes())  # noqa: E731
     else:
         sub = s.declare_subscriber("bench/pong", lambda sample: got.set())
         pub = s.declare_publisher("bench/ping", express=True)
+    if read == "array":
+        depth = np.ones((size // 2048, 512), np.float32)
+        send = lambda: pub.put(depth.tobytes())  # noqa: E731
+    else:
+        payload = bytes(size)
+        send = lambda: pub.put(payload)  # noqa: E731
     out = []
     warm_up(got, send)
     for i in range(n + 20):

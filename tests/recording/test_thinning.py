@@ -28,27 +28,27 @@ def test_only_depth_and_rgb_images_are_camera_images():
 def test_a_jittery_10_hz_stream_becomes_2_hz_and_the_rest_stays_whole():
     thin = CameraThinner(2.0)
     rng = random.Random(7)
-    kept = {DEPTH: 0, RGB: 0, INFO: 0, keys.arm_state(ROBOT): 0}
+    assert thin.thins(DEPTH) and thin.thins(RGB)
+    assert not thin.thins(INFO) and not thin.thins(keys.arm_state(ROBOT))    # kept whole
+    kept = {DEPTH: 0, RGB: 0}
     frames = 600                        # 60 s at 10 Hz
     for i in range(frames):
         t = i * S // 10 + int(rng.uniform(-0.02, 0.02) * S)     # +-20 ms of jitter
         for key in kept:
-            kept[key] += thin.keep(key, t)
+            kept[key] += thin.keep_frame(key, t)
     assert 119 <= kept[DEPTH] <= 121 and 119 <= kept[RGB] <= 121       # 2 Hz for 60 s
-    assert kept[INFO] == frames and kept[keys.arm_state(ROBOT)] == frames
     assert thin.skipped == 2 * frames - kept[DEPTH] - kept[RGB]
 
 
-def test_zero_keeps_every_frame():
-    thin = CameraThinner(0)
-    assert all(thin.keep(DEPTH, i) for i in range(100)) and thin.skipped == 0
+def test_zero_thins_nothing():
+    assert not CameraThinner(0).thins(DEPTH)
 
 
 def test_a_camera_that_pauses_starts_again_at_its_next_frame():
     thin = CameraThinner(2.0)
-    assert thin.keep(DEPTH, 0) and not thin.keep(DEPTH, S // 10)
-    assert thin.keep(DEPTH, 60 * S)             # a minute later: kept at once
-    assert not thin.keep(DEPTH, 60 * S + S // 10) and thin.keep(DEPTH, 60 * S + S // 2)
+    assert thin.keep_frame(DEPTH, 0) and not thin.keep_frame(DEPTH, S // 10)
+    assert thin.keep_frame(DEPTH, 60 * S)             # a minute later: kept at once
+    assert not thin.keep_frame(DEPTH, 60 * S + S // 10) and thin.keep_frame(DEPTH, 60 * S + S // 2)
 
 
 def depth(i: int) -> m.DepthImage:

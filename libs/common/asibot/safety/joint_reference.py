@@ -53,7 +53,8 @@ class JointReference:
 
     def reset(self, positions: list[float]) -> None:
         """Start from where the joints are, standing still."""
-        self._check(positions)
+        self._count(positions)
+        _finite(self.names, positions)
         self.target = list(positions)
         self.hold()
         self.mode = "idle"
@@ -96,9 +97,9 @@ class JointReference:
               measured: list[float] | None = None) -> None:
         """Raise ValueError (CommandRefused for a value past a limit) if this command may not
         be obeyed; changes nothing."""
-        self._check(values)
+        self._count(values)
         if feed_forward:
-            self._check(feed_forward)
+            self._count(feed_forward)
         here = [list(self.target)] + ([list(measured)] if measured is not None and len(measured) == self.n else [])
         check_limits(self, mode, values, feed_forward or [], here)
 
@@ -126,12 +127,9 @@ class JointReference:
         self.target = new
         return list(new)
 
-    def _check(self, values: list[float]) -> None:
+    def _count(self, values: list[float]) -> None:
         if len(values) != self.n:
             raise ValueError(f"expected {self.n} joint values, got {len(values)}")
-        for name, v in zip(self.names, values):
-            if not math.isfinite(v):
-                raise CommandRefused("not_finite", f"joint {name} got {quantity(v)}, not a finite number")
 
 
 class Limits(Protocol):
@@ -150,10 +148,8 @@ def check_limits(arm: Limits, mode: str, values: list[float], feed_forward: list
     `here` are where the joints are now (the set-point, and the measured positions if known):
     a joint found outside its limits may be told to stay or come back, never to go further out.
     Every arm driver refuses in these words."""
-    for vector in (values, feed_forward):
-        for name, v in zip(arm.names, vector):
-            if not math.isfinite(v):
-                raise CommandRefused("not_finite", f"joint {name} got {quantity(v)}, not a finite number")
+    _finite(arm.names, values)
+    _finite(arm.names, feed_forward)
     if mode == "velocity":
         _within_speeds(arm, values, "velocity")
         return
@@ -179,6 +175,12 @@ def check_gripper(opening: float, max_opening: float) -> None:
     if not -GRIPPER_TOLERANCE_M <= opening <= max_opening + GRIPPER_TOLERANCE_M:
         raise CommandRefused("position_limit", f"gripper opening {quantity(opening, 'm')} is outside "
                                                f"0..{max_opening:g} m")
+
+
+def _finite(names: list[str], values: list[float]) -> None:
+    for name, v in zip(names, values):
+        if not math.isfinite(v):
+            raise CommandRefused("not_finite", f"joint {name} got {quantity(v)}, not a finite number")
 
 
 def _within_speeds(arm: Limits, values: list[float], what: str) -> None:

@@ -36,15 +36,12 @@ class CameraThinner:
         self._due: dict[str, int] = {}
 
     def thins(self, key: str) -> bool:
-        """Whether `keep` may drop frames of this key: a camera image, with a rate set."""
+        """Whether frames of this key are thinned (`keep_frame`): a camera image, with a rate set;
+        every sample of any other key is kept (the recorder asks once a key)."""
         return bool(self.period_ns) and is_camera_image(key)
 
-    def keep(self, key: str, t_ns: int) -> bool:
-        """Whether to record this sample of any key."""
-        return not self.thins(key) or self.keep_frame(key, t_ns)
-
     def keep_frame(self, key: str, t_ns: int) -> bool:
-        """Whether to record this frame of a key that `thins` (the recorder asks `thins` once a key)."""
+        """Whether to record this frame of a key that `thins`."""
         due = self._due.get(key)
         if due is not None and t_ns < due:
             self.skipped += 1

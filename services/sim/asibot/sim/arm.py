@@ -88,10 +88,14 @@ class SimArm(ReferencedArm):
             return True
 
     def restart(self, q: Sequence[float]) -> None:
-        """Stand still at `q` (clipped into the limits), no fault: the arm as it is switched on."""
+        """Stand still at `q`, no fault: the arm as it is switched on."""
         with self._lock:
-            self.ref.reset(np.clip(np.asarray(q, float), self.limits.lower, self.limits.upper).tolist())
+            self._stand_at(q)
             self.fault, self._faulted, self._lag_since = "", False, None
+
+    def _stand_at(self, q: Sequence[float]) -> None:
+        """The set-point at `q`, clipped into the limits (MuJoCo's servos overshoot them a little)."""
+        self.ref.reset(np.clip(np.asarray(q, float), self.limits.lower, self.limits.upper).tolist())
 
     @property
     def mode(self) -> str:
@@ -146,5 +150,5 @@ class SimArm(ReferencedArm):
         with self._lock:
             self.fault, self._faulted = fault, True
             self.counters["faults"] += 1
-            self.ref.reset(np.clip(np.asarray(q, float), self.limits.lower, self.limits.upper).tolist())
+            self._stand_at(q)
         self.on_event("error", code, f"Arm fault: {fault}.")

@@ -74,10 +74,6 @@ class Simulation:
         self.odom = Odometer(noise=odom_noise, seed=seed) if self.scene.base else None
         self.battery = sensors.Battery()
         self.places = load_places(self.world)
-        # Re-arming of each part after a recovery; a sim starts armed, as a driver does.
-        self.arming = {"arm": self.arm.arming}
-        if self.base is not None:
-            self.arming["base"] = self.base.arming
         self._odom_acc = 0.0
         self._odom_vx = self._odom_wz = 0.0       # sums over the odometry period
         self._steps = 0
@@ -136,8 +132,10 @@ class Simulation:
     def heard(self, part: str, controller: str) -> None:
         """A command of a controller that does not hold `part` ("arm", "base"; refused by the
         service): noted, so that its stream does not move the part the moment it takes over."""
-        with self.lock:
-            self.arming[part].heard(controller, self.time)
+        if part == "arm":
+            self.arm.heard(controller)
+        elif self.base is not None:
+            self.base.heard(controller)
 
     def set_estop(self, engaged: bool, reason: str = "", by: str = "") -> None:
         with self.lock:
