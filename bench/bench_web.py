@@ -235,7 +235,7 @@ def pointer_rows(page, bus, client: CartesianClient, n: int) -> list[tuple]:
         commands.clear()
         page.get_by_role("button", name="Dead-man: off", exact=True).focus()
         page.keyboard.press("Space")                       # on: the tool follows the phone
-        wait_until(lambda: commands, timeout=5)
+        wait_until(lambda: commands, timeout=5, message=lambda: _pointer_said(page, client))
         page.wait_for_timeout(300)
         page.get_by_role("button", name="Dead-man: on", exact=True).focus()
         page.keyboard.press("Space")                       # off: the arm stops
@@ -312,6 +312,19 @@ def _answers(client: CartesianClient) -> bool:
         return True
     except Exception:
         return False
+
+
+def _pointer_said(page, client: CartesianClient) -> str:
+    """What the page and the arm said when the dead-man sent nothing: a failure's message."""
+    said = page.evaluate("""() => ({
+        status: [...document.querySelectorAll('#view [role=status]')].map((n) => n.textContent).join(' | '),
+        notice: (document.getElementById('notice') || {}).textContent || '',
+        deadman: [...document.querySelectorAll('button.deadman')].map((b) => `${b.textContent} pressed=${b.getAttribute('aria-pressed')} disabled=${b.disabled}`).join(', '),
+        focused: document.activeElement ? (document.activeElement.textContent || document.activeElement.tagName) : '',
+        scanning: !document.getElementById('scan-ring')?.hidden,
+        reports: (window.__reports || []).length,
+    })""")
+    return f"the dead-man sent no arm command within 5 s; the page: {said}; the arm: {client.state()}"
 
 
 def _idle(client: CartesianClient) -> bool:

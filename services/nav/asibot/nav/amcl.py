@@ -38,6 +38,9 @@ Facts in docs/reference/navigation.md, 'AMCL' (amcl pf.c, amcl_laser.cpp, amcl_o
   (amcl's reset makes it inject once and stop); Probabilistic Robotics table 8.3 has no
   reset either. The injected share is capped by `max_injection`, so a crowd standing in
   front of the laser cannot scatter the whole filter.
+- Leaps: amcl believes its heaviest cluster wherever it lands; here a tight estimate far from
+  where odometry carried the last trusted one is held off (`leap_dist`, `holding`) and, if the
+  scans keep showing it, searched for as after a global spread before it is believed.
 - The filter updates only after the odometry moved update_min_d on x or y or update_min_a
   in heading; between updates, `pose(odom)` carries the last estimate forward by odometry
   (amcl's map->odom transform).
@@ -117,6 +120,23 @@ class AmclParams:
     #: tests' sim (no particle near the truth, a look-alike place fitting best); with 10000, in
     #: none of 200, at 55 ms an update while the cloud is wide (tests/nav/test_lost.py)
     search_particles: int = 10000
+    #: A tight estimate that lands further than `leap_dist` (m, plus `leap_per_m` per metre
+    #: driven) or `leap_angle` (rad, plus `leap_per_rad` per radian turned) from where odometry
+    #: carried the last trusted one is a leap: a place that looks alike, or the robot carried
+    #: off. Near a box that is not on the map, random guesses that one scan favoured once took a
+    #: robot at the sofa for one 9 m away, "localised". A leap is not believed: the pose is the
+    #: trusted one carried by odometry (`holding`), and a share `hold_share` of each resampled
+    #: set is drawn around it, so the scans can bring the estimate back. After `hold_m` metres or
+    #: `hold_rad` radians without that, the filter searches as after a global spread.
+    leap_dist: float = 1.0
+    leap_per_m: float = 0.1
+    leap_angle: float = 0.6
+    leap_per_rad: float = 0.1
+    hold_m: float = 1.0
+    hold_rad: float = math.pi
+    hold_share: float = 0.5
+    #: the spread (m, m, rad) of the poses drawn around the held pose
+    hold_std: tuple[float, float, float] = (0.1, 0.1, 0.05)
 
 
 @dataclass
@@ -135,6 +155,19 @@ class Estimate:
     @property
     def std_theta(self) -> float:
         return float(math.sqrt(max(0.0, self.covariance[2, 2])))
+
+
+@dataclass
+class _Trusted:
+    """The last estimate the filter trusted, the odometry then, and what was driven since."""
+    pose: Pose
+    odom: Pose
+    metres: float = 0.0
+    radians: float = 0.0
+
+    def carried(self, odom: Pose) -> Pose:
+        """Where odometry says the robot is now, from the trusted pose."""
+        return compose(self.pose, relative(self.odom, odom))
 
 
 def kld_limit(k: np.ndarray, err: float, z: float, lo: int, hi: int) -> np.ndarray:
@@ -176,6 +209,11 @@ class Amcl:
         self._fit_needed = 0.0       # the fit that ends it
         self.fit = 0.0               # the last scan's fit, per beam (see search_fit)
         self.estimate: Estimate | None = None
+        self._trusted: _Trusted | None = None
+        self._holding = False        # a leap not believed: the pose is the trusted one, carried
+        self._held_from = (0.0, 0.0)  # the trusted one's metres and radians when the hold began
+        #: leaps not believed since the start (see leap_dist)
+        self.leaps = 0
 
     # --------------------------------------------------------------------- initialising
 
@@ -204,23 +242,37 @@ class Amcl:
         self.weights = np.full(len(self.poses), 1.0 / len(self.poses))
         typical = self.w_slow
         self._restart()
+        self._search(typical)
+
+    def _search(self, typical: float) -> None:
+        """Trust no estimate until `global_min_updates` updates and a fit near `typical` (the
+        scans' fit while localised before; 0 when it never was)."""
         self._searching = True
+        self._trusted, self._holding = None, False
         self._search_updates = self.params.global_min_updates
         self._fit_needed = self.params.search_fit * typical if typical > 0 else self.params.fit_floor
 
     @property
+    def holding(self) -> bool:
+        """A leap was not believed (see `leap_dist`): the pose is the last trusted one, carried
+        by odometry, until the scans agree again or `hold_m` / `hold_rad` run out."""
+        return self._holding
+
+    @property
     def searching(self) -> bool:
-        """Still looking everywhere since a global spread: too few updates, or scans that do not
-        fit the estimate, to trust it."""
+        """Still looking everywhere since a global spread (or a leap held too long): too few
+        updates, or scans that do not fit the estimate, to trust it."""
         return self._searching
 
     def odometry_restarted(self) -> None:
         """The odometry started again (a base driver or the sim restarted): the next reading is
         the new reference, and the step from the old one is not the robot's motion."""
         self._odom = None
+        self._trusted, self._holding = None, False
 
     def _restart(self) -> None:
         self._searching = False
+        self._trusted, self._holding = None, False
         self.w_slow = self.w_fast = 0.0
         self._averaging = False
         self._force = True
@@ -254,6 +306,7 @@ class Amcl:
         if not (self._force or self.moved_enough(odom)):
             return False
         self.motion(self._odom, odom)
+        self._drove(self._odom, odom)
         self._odom = odom
         resample = False
         if scan is not None and len(scan.ranges):
@@ -268,9 +321,40 @@ class Amcl:
         # injected random poses weigh as much as the rest and, a few hundred of them joining up
         # bin to bin across the flat, make the heaviest cluster the whole apartment.
         self.estimate = self._cluster_estimate()
+        self._judge_leap(odom)
         if resample:
             self.resample()
         return True
+
+    def _drove(self, old: Pose, new: Pose) -> None:
+        if self._trusted is not None:
+            self._trusted.metres += math.hypot(new.x - old.x, new.y - old.y)
+            self._trusted.radians += abs(wrap(new.theta - old.theta))
+
+    def _judge_leap(self, odom: Pose) -> None:
+        """Trust a tight estimate that odometry explains; hold the trusted pose against one that
+        leapt, and search when the scans have not come back to it within `hold_m`/`hold_rad`."""
+        p, est, trusted = self.params, self.estimate, self._trusted
+        assert est is not None
+        if self._searching:
+            return
+        tight = est.std_xy < p.localised_std and est.std_theta < p.localised_std
+        if trusted is None:
+            if tight:
+                self._trusted = _Trusted(est.pose, odom)
+            return
+        expected = trusted.carried(odom)
+        if tight and (expected.distance(est.pose) <= p.leap_dist + p.leap_per_m * trusted.metres
+                      and abs(wrap(expected.theta - est.pose.theta)) <= p.leap_angle + p.leap_per_rad * trusted.radians):
+            self._trusted, self._holding = _Trusted(est.pose, odom), False
+        elif self._holding:
+            metres, radians = self._held_from
+            if trusted.metres - metres > p.hold_m or trusted.radians - radians > p.hold_rad:
+                self._search(self.w_slow)
+        elif tight:
+            self.leaps += 1
+            self._holding = True
+            self._held_from = (trusted.metres, trusted.radians)
 
     def motion(self, old: Pose, new: Pose) -> None:
         """The diff-corrected odometry model, applied to every particle with its own noise."""
@@ -386,6 +470,12 @@ class Amcl:
         inject = self.rng.random(m) < self.injection_share()
         if inject.any():
             new[inject] = self._random_poses(int(inject.sum()))
+        if self._holding and self._trusted is not None and self._odom is not None:
+            held = self._trusted.carried(self._odom)
+            near = ~inject & (self.rng.random(m) < p.hold_share)
+            around = self.rng.standard_normal((int(near.sum()), 3)) * p.hold_std
+            new[near] = np.c_[held.x, held.y, held.theta] + around
+            new[near, 2] = wrap_array(new[near, 2])
         keys = ((np.floor(new[:, 0] / p.bin_xy).astype(np.int64) & 0xFFFFF) << 40
                 | (np.floor(new[:, 1] / p.bin_xy).astype(np.int64) & 0xFFFFF) << 20
                 | (np.floor(new[:, 2] / p.bin_theta).astype(np.int64) & 0xFFFFF))
@@ -435,6 +525,8 @@ class Amcl:
     def pose(self, odom: Pose) -> Pose:
         """The robot's map pose now: the last estimate carried forward by odometry."""
         est = self.current_estimate()
+        if self._holding and self._trusted is not None:
+            return self._trusted.carried(odom)
         if self._odom is None:
             return est.pose
         return compose(est.pose, relative(self._odom, odom))

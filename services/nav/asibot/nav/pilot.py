@@ -5,7 +5,8 @@ simulator. It knows nothing of Zenoh and takes the time as an argument.
 
 - Where it is: AMCL on odometry and scans (`Amcl`). The filter updates when a new scan has
   come and the robot moved enough; between updates the pose is carried by odometry. The
-  robot counts as localised while the filter's main cluster is tighter than `localised_std`.
+  robot counts as localised while the filter's main cluster is tighter than `localised_std`,
+  or while it holds its last trusted pose against an estimate that leapt (`Amcl.holding`).
   Odometry that goes back in time or leaps (`odometry_jump`: a base driver or the sim that
   restarted, the robot carried off) means the robot no longer knows where it is: the filter
   looks everywhere (so it is not localised, never "localised" metres off), whatever drives
@@ -189,8 +190,9 @@ class Pilot:
         if self.mapping:
             return True          # the map is drawn around where the mapper says the robot is
         est = self.amcl.estimate
-        return (est is not None and not self.amcl.searching
-                and est.std_xy < self.params.localised_std and est.std_theta < self.params.localised_std)
+        if est is None or self.amcl.searching:
+            return False
+        return self.amcl.holding or (est.std_xy < self.params.localised_std and est.std_theta < self.params.localised_std)
 
     def pose(self) -> Pose:
         """The map pose now (the filter's estimate, or the mapper's, carried forward by odometry)."""

@@ -253,8 +253,30 @@ function place() {
 
 function loop() {
   if (!scan.running) return;
+  follow();
   place();
   requestAnimationFrame(loop);
+}
+
+// A page that drew its controls again under the ring (a step's description that came late)
+// leaves the ring, and every opened row or group, on nodes that are gone: a select would act on
+// nothing, and an opened row would hold only Back. Find each again among the new controls by
+// its words; one that is gone closes, and the ring goes on at the level above.
+function follow() {
+  const gone = (entry) => entry && !entry.nodes.every((n) => n.isConnected);
+  if (!gone(scan.entry) && !scan.levels.some((lv) => gone(lv.entry))) return;
+  for (let i = 1; i < scan.levels.length; i += 1) {
+    const lv = scan.levels[i];
+    if (!gone(lv.entry)) continue;
+    const again = scan.levels[i - 1].build().find((e) => e.label === lv.entry.label && e.open);
+    if (!again) { scan.levels.length = i; break; }
+    lv.entry = again;
+    lv.build = withBack(again);
+  }
+  const label = scan.entry && scan.entry.label;
+  const same = level().build().findIndex((e) => e.label === label);
+  if (same >= 0) level().index = same;
+  refresh();
 }
 
 // --- sound: a short beep per move, a higher one per select (WebAudio, made at the first press) --
@@ -375,6 +397,7 @@ export function stop() {
 }
 
 function next() {
+  follow();
   const lv = level();
   const n = level().build().length;
   lv.index = (lv.index + 1) % Math.max(n, 1);
@@ -388,6 +411,7 @@ function next() {
 }
 
 function select() {
+  follow();
   let entry = scan.entry;
   if (entry && entry.back) { back(); return; }
   if (entry && entry.undo) { undo(); return; }
@@ -395,7 +419,7 @@ function select() {
   while (entry && entry.open) {
     const inside = entry.open();
     if (inside.length > 1 || entry.page) {
-      scan.levels.push({ build: withBack(entry), index: startOf(inside), steps: 0, page: Boolean(entry.page) });
+      scan.levels.push({ build: withBack(entry), entry, index: startOf(inside), steps: 0, page: Boolean(entry.page) });
       beep(990, 60);
       show();
       return;

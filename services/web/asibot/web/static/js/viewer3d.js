@@ -150,7 +150,8 @@ export class RobotViewer {
       }
       for (const name of this.depthCameras.names) {
         const buffer = await api.bytes(paths.robot.cloud(robot, name));
-        if (robot !== this.robotId) return;
+        // Paused while the answer came: the picture keeps what it showed (CI: "the paused picture moved").
+        if (robot !== this.robotId || this.paused) return;
         this.drawCloud(name, buffer);
       }
     } catch (e) {
