@@ -127,7 +127,10 @@ class AmclParams:
     #: robot at the sofa for one 9 m away, "localised". A leap is not believed: the pose is the
     #: trusted one carried by odometry (`holding`), and a share `hold_share` of each resampled
     #: set is drawn around it, so the scans can bring the estimate back. After `hold_m` metres or
-    #: `hold_rad` radians without that, the filter searches as after a global spread.
+    #: `hold_rad` radians without that, the leapt estimate is believed if odometry explained it
+    #: for the last `leap_confirm_updates` updates and the scans fit it as well as before
+    #: (`search_fit`): the robot was carried off. Otherwise the filter searches as after a
+    #: global spread.
     leap_dist: float = 1.0
     leap_per_m: float = 0.1
     leap_angle: float = 0.6
@@ -135,6 +138,7 @@ class AmclParams:
     hold_m: float = 1.0
     hold_rad: float = math.pi
     hold_share: float = 0.5
+    leap_confirm_updates: int = 8
     #: the spread (m, m, rad) of the poses drawn around the held pose
     hold_std: tuple[float, float, float] = (0.1, 0.1, 0.05)
 
@@ -212,6 +216,8 @@ class Amcl:
         self._trusted: _Trusted | None = None
         self._holding = False        # a leap not believed: the pose is the trusted one, carried
         self._held_from = (0.0, 0.0)  # the trusted one's metres and radians when the hold began
+        self._leapt: _Trusted | None = None   # the last tight estimate while holding
+        self._leapt_updates = 0                # updates since then that odometry explained
         #: leaps not believed since the start (see leap_dist)
         self.leaps = 0
 
@@ -248,7 +254,7 @@ class Amcl:
         """Trust no estimate until `global_min_updates` updates and a fit near `typical` (the
         scans' fit while localised before; 0 when it never was)."""
         self._searching = True
-        self._trusted, self._holding = None, False
+        self._trusted, self._holding, self._leapt = None, False, None
         self._search_updates = self.params.global_min_updates
         self._fit_needed = self.params.search_fit * typical if typical > 0 else self.params.fit_floor
 
@@ -268,11 +274,11 @@ class Amcl:
         """The odometry started again (a base driver or the sim restarted): the next reading is
         the new reference, and the step from the old one is not the robot's motion."""
         self._odom = None
-        self._trusted, self._holding = None, False
+        self._trusted, self._holding, self._leapt = None, False, None
 
     def _restart(self) -> None:
         self._searching = False
-        self._trusted, self._holding = None, False
+        self._trusted, self._holding, self._leapt = None, False, None
         self.w_slow = self.w_fast = 0.0
         self._averaging = False
         self._force = True
@@ -327,13 +333,24 @@ class Amcl:
         return True
 
     def _drove(self, old: Pose, new: Pose) -> None:
-        if self._trusted is not None:
-            self._trusted.metres += math.hypot(new.x - old.x, new.y - old.y)
-            self._trusted.radians += abs(wrap(new.theta - old.theta))
+        for track in (self._trusted, self._leapt):
+            if track is not None:
+                track.metres += math.hypot(new.x - old.x, new.y - old.y)
+                track.radians += abs(wrap(new.theta - old.theta))
+
+    def _explains(self, track: _Trusted, est: Estimate, odom: Pose) -> bool:
+        """Whether `est` is tight and where odometry carried `track` (within the leap's tolerance)."""
+        p = self.params
+        expected = track.carried(odom)
+        return (est.std_xy < p.localised_std and est.std_theta < p.localised_std
+                and expected.distance(est.pose) <= p.leap_dist + p.leap_per_m * track.metres
+                and abs(wrap(expected.theta - est.pose.theta)) <= p.leap_angle + p.leap_per_rad * track.radians)
 
     def _judge_leap(self, odom: Pose) -> None:
         """Trust a tight estimate that odometry explains; hold the trusted pose against one that
-        leapt, and search when the scans have not come back to it within `hold_m`/`hold_rad`."""
+        leapt. At the end of the hold (`hold_m`, `hold_rad`), a leapt estimate that odometry
+        explained all along and that the scans fit as well as before is believed (the robot was
+        carried off); any other is searched for."""
         p, est, trusted = self.params, self.estimate, self._trusted
         assert est is not None
         if self._searching:
@@ -343,18 +360,23 @@ class Amcl:
             if tight:
                 self._trusted = _Trusted(est.pose, odom)
             return
-        expected = trusted.carried(odom)
-        if tight and (expected.distance(est.pose) <= p.leap_dist + p.leap_per_m * trusted.metres
-                      and abs(wrap(expected.theta - est.pose.theta)) <= p.leap_angle + p.leap_per_rad * trusted.radians):
-            self._trusted, self._holding = _Trusted(est.pose, odom), False
+        if self._explains(trusted, est, odom):
+            self._trusted, self._holding, self._leapt = _Trusted(est.pose, odom), False, None
         elif self._holding:
+            steady = self._leapt is not None and self._explains(self._leapt, est, odom)
+            self._leapt_updates = self._leapt_updates + 1 if steady else 0
+            self._leapt = _Trusted(est.pose, odom) if tight else None
             metres, radians = self._held_from
             if trusted.metres - metres > p.hold_m or trusted.radians - radians > p.hold_rad:
-                self._search(self.w_slow)
+                if self._leapt_updates >= p.leap_confirm_updates and self.fit >= p.search_fit * self.w_slow:
+                    self._trusted, self._holding, self._leapt = _Trusted(est.pose, odom), False, None
+                else:
+                    self._search(self.w_slow)
         elif tight:
             self.leaps += 1
             self._holding = True
             self._held_from = (trusted.metres, trusted.radians)
+            self._leapt, self._leapt_updates = _Trusted(est.pose, odom), 0
 
     def motion(self, old: Pose, new: Pose) -> None:
         """The diff-corrected odometry model, applied to every particle with its own noise."""
