@@ -119,6 +119,28 @@ def http(stack, method: str, path: str, body: dict | None = None) -> dict:
     return answer or {}
 
 
+class HeldAnswers:
+    """The page's requests to `pattern`, their answers held while `holding` (a server that is
+    slow to answer, at the moment a test chooses), then let through with `release`."""
+
+    def __init__(self, page, pattern: str, holding: bool = False) -> None:
+        self.page, self.pattern, self.holding = page, pattern, holding
+        self.routes: list = []
+        page.route(pattern, lambda route: self.routes.append(route) if self.holding else route.continue_())
+
+    def wait(self, message: str) -> None:
+        """Until a request is held. Playwright calls a route's handler only while the test is
+        inside a Playwright call: a wait that only sleeps would never see the request."""
+        wait_until(lambda: self.page.wait_for_timeout(50) or self.routes, 5, message=message)
+
+    def release(self) -> None:
+        """Stop holding, and let the held requests through, once one of them is answered."""
+        self.holding = False
+        with self.page.expect_response(self.pattern):
+            while self.routes:
+                self.routes.pop(0).continue_()
+
+
 def screenshot(page, name: str) -> Path:
     SHOTS.mkdir(exist_ok=True)
     path = SHOTS / f"{name}.png"

@@ -20,7 +20,7 @@ from asibot import keys
 from asibot.testing import wait_until
 
 from . import switch
-from .conftest import ROOT, http, screenshot
+from .conftest import ROOT, HeldAnswers, http, screenshot
 from .switch import choose, hold, moves, ring_label, ringed, tap, tap_until, wait_ringed
 from .test_browser import ArmWatch
 
@@ -778,16 +778,13 @@ def test_the_3d_view_can_be_paused(page, kitchen, arm):
 def test_a_cloud_that_comes_while_paused_is_not_drawn(page, kitchen, arm):
     """The cameras' points asked for before Pause and answered after it: the paused picture keeps
     what it showed (CI: "the paused picture moved", one run in many)."""
-    held: list = []
-    holding = [False]
-    page.route("**/cameras/*/cloud", lambda route: held.append(route) if holding[0] else route.continue_())
+    clouds = HeldAnswers(page, "**/cameras/*/cloud")
     go(page, "joint")
     page.wait_for_function("document.querySelector('.viewer canvas').width > 0")
     page.wait_for_function("Number(document.querySelector('.viewer').dataset.points) > 0", timeout=15000)
     wait_until(lambda: arm.joints() and arm.still(), timeout=30)
-    holding[0] = True
-    # Playwright calls its route handlers only while the test is inside a Playwright call
-    wait_until(lambda: page.wait_for_timeout(50) or held, 5, message="the page asked for no cloud")
+    clouds.holding = True
+    clouds.wait("the page asked for no cloud")
     pause = page.locator(".viewer-bar").get_by_role("button", name="Pause")
     pause.click()
     frames(page)
@@ -795,9 +792,7 @@ def test_a_cloud_that_comes_while_paused_is_not_drawn(page, kitchen, arm):
     q0 = arm.joints()
     http(kitchen, "POST", f"api/robots/{ROBOT}/step", {"space": "joint", "axis": 0, "direction": -1 if q0[0] > 0 else 1, "level": 5})
     arm.stopped_at(time.monotonic() - 0.1, timeout=20)    # the cloud now shows the arm elsewhere
-    holding[0] = False
-    with page.expect_response("**/cameras/*/cloud"):
-        held.pop(0).continue_()
+    clouds.release()
     frames(page)
     assert page.evaluate(CANVAS_SUM) == frozen, "the paused picture moved"
     pause.click()

@@ -12,7 +12,7 @@ from asibot.client import SimClient
 from asibot.testing import wait_until
 from asibot.web import steps
 
-from .conftest import http, screenshot
+from .conftest import HeldAnswers, http, screenshot
 from .switch import Presses, make_pick_program, ringed, with_settings
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(400)]
@@ -107,9 +107,7 @@ def test_what_is_typed_in_a_new_step_is_kept_when_the_description_comes_late(pag
     step's field was typed in redrew the list and threw the typing away (CI, stop 43): the
     answer is held here until the typing is done."""
     from playwright.sync_api import expect
-    held: list = []
-    holding = [True]
-    page.route("**/steps/preview", lambda route: held.append(route) if holding[0] else route.continue_())
+    described = HeldAnswers(page, "**/steps/preview", holding=True)
     page.evaluate("() => { location.hash = 'program'; }")
     page.get_by_label("New program name").fill("late_answer")
     page.get_by_role("button", name="New from steps").click()
@@ -119,11 +117,8 @@ def test_what_is_typed_in_a_new_step_is_kept_when_the_description_comes_late(pag
     text.click()
     text.press("Control+a")
     text.type("Here is your red can.")                 # typed, not yet changed: no Tab
-    wait_until(lambda: page.wait_for_timeout(50) or held, 5, message="adding the step asked for no description")
-    holding[0] = False
-    with page.expect_response("**/steps/preview"):
-        while held:
-            held.pop(0).continue_()
+    described.wait("adding the step asked for no description")
+    described.release()
     # The answer described the step as added; the field keeps what was typed, and the focus.
     expect(text).to_have_value("Here is your red can.")
     expect(text).to_be_focused()
@@ -160,9 +155,7 @@ def test_the_ring_stays_on_a_step_when_the_page_draws_it_again(page, kitchen):
     the row held only Back, and one switch went round the whole page again (CI: 63 presses for
     the editor, 35 on a quiet machine). The answer is held here until the ring is in the row."""
     from playwright.sync_api import expect
-    held: list = []
-    holding = [False]
-    page.route("**/steps/preview", lambda route: held.append(route) if holding[0] else route.continue_())
+    described = HeldAnswers(page, "**/steps/preview")
     with_settings(page, "#program", ".cm-content", enabled=True)
     page.get_by_label("New program name").fill("late_ring")
     page.get_by_role("button", name="New from steps").click()
@@ -171,18 +164,15 @@ def test_the_ring_stays_on_a_step_when_the_page_draws_it_again(page, kitchen):
     for name in ("Open gripper", "Close gripper"):
         with page.expect_response("**/steps/preview"):
             adders.get_by_role("button", name=name, exact=True).click()
-    holding[0] = True
+    described.holding = True
     switch = Presses(page)
     switch.start()
     switch.to("Wait")
-    wait_until(lambda: page.wait_for_timeout(50) or held, 5, message="adding the step asked for no description")
+    described.wait("adding the step asked for no description")
     switch.until(lambda now: "Move step 3 up" in now)          # the step's row
     switch.hold()                                              # opened: its buttons, then Back
     assert ringed(page) and "Back" not in page.evaluate("document.getElementById('scan-ring').dataset.label")
-    holding[0] = False
-    with page.expect_response("**/steps/preview"):
-        while held:
-            held.pop(0).continue_()
+    described.release()
     # the list was drawn again: the ring stands on the new buttons of the same row
     wait_until(lambda: ringed(page) and page.evaluate(
         "[...document.querySelectorAll('[data-scanned]')].every((n) => n.isConnected && n.closest('li'))"), 5,

@@ -39,8 +39,9 @@ Facts in docs/reference/navigation.md, 'AMCL' (amcl pf.c, amcl_laser.cpp, amcl_o
   reset either. The injected share is capped by `max_injection`, so a crowd standing in
   front of the laser cannot scatter the whole filter.
 - Leaps: amcl believes its heaviest cluster wherever it lands; here a tight estimate far from
-  where odometry carried the last trusted one is held off (`leap_dist`, `holding`) and, if the
-  scans keep showing it, searched for as after a global spread before it is believed.
+  where odometry carried the last trusted one is held off (`leap_dist`, `holding`): believed
+  after half a turn if it stayed where odometry put it and fits, else searched for as after a
+  global spread.
 - The filter updates only after the odometry moved update_min_d on x or y or update_min_a
   in heading; between updates, `pose(odom)` carries the last estimate forward by odometry
   (amcl's map->odom transform).
@@ -159,6 +160,10 @@ class Estimate:
     @property
     def std_theta(self) -> float:
         return float(math.sqrt(max(0.0, self.covariance[2, 2])))
+
+    def within(self, std: float) -> bool:
+        """Whether the heaviest cluster is tighter than `std` (m, and rad)."""
+        return self.std_xy < std and self.std_theta < std
 
 
 @dataclass
@@ -342,20 +347,20 @@ class Amcl:
         """Whether `est` is tight and where odometry carried `track` (within the leap's tolerance)."""
         p = self.params
         expected = track.carried(odom)
-        return (est.std_xy < p.localised_std and est.std_theta < p.localised_std
+        return (est.within(p.localised_std)
                 and expected.distance(est.pose) <= p.leap_dist + p.leap_per_m * track.metres
                 and abs(wrap(expected.theta - est.pose.theta)) <= p.leap_angle + p.leap_per_rad * track.radians)
 
     def _judge_leap(self, odom: Pose) -> None:
         """Trust a tight estimate that odometry explains; hold the trusted pose against one that
         leapt. At the end of the hold (`hold_m`, `hold_rad`), a leapt estimate that odometry
-        explained all along and that the scans fit as well as before is believed (the robot was
-        carried off); any other is searched for."""
+        explained for the last `leap_confirm_updates` updates and that the scans fit as well as
+        before is believed (the robot was carried off); any other is searched for."""
         p, est, trusted = self.params, self.estimate, self._trusted
         assert est is not None
         if self._searching:
             return
-        tight = est.std_xy < p.localised_std and est.std_theta < p.localised_std
+        tight = est.within(p.localised_std)
         if trusted is None:
             if tight:
                 self._trusted = _Trusted(est.pose, odom)
@@ -443,7 +448,7 @@ class Amcl:
             return np.log1p((pz ** 3).sum(axis=1)), pz.shape[1]
         use = np.ones(pz.shape[1], bool)
         est = self.estimate
-        if est is not None and (est.converged or (est.std_xy < p.localised_std and est.std_theta < p.localised_std)):
+        if est is not None and (est.converged or est.within(p.localised_std)):
             # amcl's beam skipping: a beam most particles cannot explain is an unmapped obstacle
             agree = (dist < p.beam_skip_distance).mean(axis=0)
             use = agree >= p.beam_skip_threshold
@@ -472,7 +477,7 @@ class Amcl:
         self.fit = w_avg
         if not self._averaging:
             est = self.estimate
-            self._averaging = est is not None and est.std_xy < p.localised_std and est.std_theta < p.localised_std
+            self._averaging = est is not None and est.within(p.localised_std)
         if self._averaging:
             self.w_slow = w_avg if self.w_slow == 0 else self.w_slow + p.recovery_alpha_slow * (w_avg - self.w_slow)
             self.w_fast = w_avg if self.w_fast == 0 else self.w_fast + p.recovery_alpha_fast * (w_avg - self.w_fast)

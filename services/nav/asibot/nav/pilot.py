@@ -192,7 +192,7 @@ class Pilot:
         est = self.amcl.estimate
         if est is None or self.amcl.searching:
             return False
-        return self.amcl.holding or (est.std_xy < self.params.localised_std and est.std_theta < self.params.localised_std)
+        return self.amcl.holding or est.within(self.params.localised_std)
 
     def pose(self) -> Pose:
         """The map pose now (the filter's estimate, or the mapper's, carried forward by odometry)."""
