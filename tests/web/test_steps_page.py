@@ -13,7 +13,7 @@ from asibot.testing import wait_until
 from asibot.web import steps
 
 from .conftest import HeldAnswers, http, screenshot
-from .switch import Presses, make_pick_program, ringed, with_settings
+from .switch import Presses, make_pick_program, ring_kind, ring_label, ringed, with_settings
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(400)]
 
@@ -181,3 +181,39 @@ def test_the_ring_stays_on_a_step_when_the_page_draws_it_again(page, kitchen):
     switch.to("Move step 3 up")
     assert switch.count - before <= 3, switch.count - before
     expect(page.get_by_role("list", name="Steps").locator(".step-sentence").nth(1)).to_contain_text("Wait")
+
+
+def test_a_dozen_programs_are_one_entry_that_a_select_opens(page, kitchen):
+    """Block scanning: a person with twelve programs passed them row by row on the way to "New:
+    Pick it up…" (one press each: 19 presses against 8 with one program). A long list is one
+    entry, "Programs (N)", that the ring passes in one press and a select opens into its rows."""
+    from playwright.sync_api import expect
+    made = [f"errand_{k:02d}" for k in range(12)]
+    for name in made:
+        http(kitchen, "POST", "/api/programs", {"name": name})
+    try:
+        listed = len(http(kitchen, "GET", "/api/programs")["programs"])
+        with_settings(page, "#program", ".cm-content", enabled=True)
+        page.get_by_role("button", name=made[-1], exact=True).wait_for(timeout=10000)
+        switch = Presses(page)
+        switch.start()
+        switch.until(lambda now: ring_label(page) == f"Programs ({listed})")
+        assert ring_kind(page) == "group" and len(ringed(page)) == listed
+        screenshot(page, "scan-programs-block")
+        switch.to("New: Pick it up…")
+        page.get_by_role("group", name="Choose a point").wait_for(timeout=10000)
+        print(f"\n'New: Pick it up…' with {listed} programs by one switch: {switch.count} presses")
+        assert switch.count <= 10, switch.count      # 8 with one program, before and after
+
+        # A program in the list: the ring opens it, then goes down its rows.
+        page.keyboard.press("Escape")
+        with_settings(page, "#program", ".cm-content", enabled=True)
+        switch = Presses(page)
+        switch.start()
+        switch.to(made[9])
+        expect(page.get_by_role("heading", name=f"{made[9]}.py")).to_be_visible(timeout=10000)
+        # one press more than when each program was a row of the page: the select that opens them
+        assert switch.count <= listed + 2, switch.count       # 14 with 13 programs
+    finally:
+        for name in made:
+            kitchen.web("DELETE", f"/api/programs/{name}")

@@ -12,7 +12,9 @@
 // works: the control the page moved the keyboard focus to (a new step, the first choice of a
 // list just opened), else the control selected; the rest of the page follows, round to the top.
 // Every opened row or group ends with Back; right after a select changed the page, "Undo: back
-// to <page>" follows the stop and puts the page and the ring back as they were.
+// to <page>" follows the stop and puts the page and the ring back as they were. A long list (a
+// labelled group of more than BLOCK_ROWS rows: a dozen programs) is one entry, "Programs (12)",
+// that a select opens (block scanning, as AAC grids do): passing it costs one press, not twelve.
 //
 // Controls that act while held (jog "Hold to move") take the 'scan:select' event: they start, and
 // the next press of any switch stops them (select-to-start, select-to-stop). When scanning is off
@@ -25,6 +27,7 @@ import { el } from './ui.js';
 // Ringed first at every level that starts over: the stop, and Release all while a robot is stopped.
 const FIRST = ['estop', 'release-all'];
 const MAX_GROUP = 8;          // a group with more controls than this is scanned row by row inside
+const BLOCK_ROWS = 4;         // a labelled group of more rows than this is one entry (a block)
 export const MOUSE_BUTTONS = ['Left mouse button', 'Middle mouse button', 'Right mouse button', 'Back mouse button', 'Forward mouse button'];
 
 // --- what can be scanned -----------------------------------------------------------------------
@@ -77,8 +80,46 @@ function groupEntry(nodes, box, label, collect) {
   if (nodes.length === 1) return item(nodes[0]);
   return {
     nodes, box, label: `${label} (${nodes.length})`,
-    open: () => { const now = collect(); return now.length > MAX_GROUP ? rowsOf(now).map(rowEntry) : now.map(item); },
+    open: () => { const now = collect(); return now.length > MAX_GROUP ? blocked(now, rowLines) : now.map(item); },
   };
+}
+
+// How a run of controls is scanned: row by row (row/column), or one by one (linear).
+function rowLines(nodes) { return rowsOf(nodes).map(rowEntry); }
+function itemLines(nodes) { return nodes.map(item); }
+
+// The long lists among `nodes`: labelled groups of more than BLOCK_ROWS rows, outermost first.
+function longLists(nodes) {
+  const lists = [];
+  for (const group of document.querySelectorAll('[role=group][aria-label]')) {
+    if (lists.some((l) => l.contains(group))) continue;
+    const inside = nodes.filter((n) => group.contains(n));
+    if (inside.length > BLOCK_ROWS && rowsOf(inside).length > BLOCK_ROWS) lists.push(group);
+  }
+  return lists;
+}
+
+// `nodes` as entries by `lines`, with each long list one entry in its place that opens into
+// its own lines; its label counts what it holds.
+function blocked(nodes, lines) {
+  const lists = longLists(nodes);
+  if (!lists.length) return lines(nodes);
+  const entries = [];
+  let run = [];
+  const flush = () => { entries.push(...lines(run)); run = []; };
+  const placed = new Set();
+  for (const node of nodes) {
+    const list = lists.find((l) => l.contains(node));
+    if (!list) { run.push(node); continue; }
+    if (placed.has(list)) continue;
+    placed.add(list);
+    flush();
+    const inside = nodes.filter((n) => list.contains(n));
+    entries.push({ nodes: inside, box: list, list: true, label: `${list.getAttribute('aria-label')} (${inside.length})`,
+                   open: () => lines(controls(list)) });
+  }
+  flush();
+  return entries;
 }
 
 // The page's regions for group scanning: the header's, then each top section of the view, then
@@ -114,8 +155,7 @@ function pageEntries() {
   const pattern = settings().pattern;
   let entries;
   if (pattern === 'group') entries = groups();
-  else if (pattern === 'rowcol') entries = rowsOf(controls(document.body)).map(rowEntry);
-  else entries = controls(document.body).map(item);
+  else entries = blocked(controls(document.body), pattern === 'rowcol' ? rowLines : itemLines);
   return fromResume(entries);
 }
 
@@ -158,19 +198,21 @@ function topEntries() {
 function withBack(entry) {
   const back = {
     nodes: entry.nodes, box: entry.box, back: true,
-    label: entry.page ? 'Back to your tasks and places' : `Back: leave this ${entry.box ? 'group' : 'row'}`,
+    label: entry.page ? 'Back to your tasks and places' : `Back: leave this ${entry.list ? 'list' : entry.box ? 'group' : 'row'}`,
   };
   return () => [...entry.open(), back];
 }
 
 // Where an opened row starts: after the control that is current there (the shown tab), so the
-// tab row scans from the page the person is on; else on the control where the person works.
-function startOf(inside) {
+// tab row scans from the page the person is on; else on the control where the person works,
+// and in a long list on its row.
+function startOf(inside, list = false) {
   const current = inside.findIndex((e) => e.nodes.length === 1
     && (e.nodes[0].getAttribute('aria-selected') === 'true' || e.nodes[0].getAttribute('aria-current') === 'page'));
   if (current >= 0) return (current + 1) % inside.length;
   const at = resumeAt();
-  return Math.max(0, inside.findIndex((e) => e.nodes.length === 1 && e.nodes[0] === at));
+  const here = (e) => (list ? e.nodes.some((n) => n === at || n.contains(at)) : e.nodes.length === 1 && e.nodes[0] === at);
+  return Math.max(0, inside.findIndex(here));
 }
 
 // --- the ring ----------------------------------------------------------------------------------
@@ -419,7 +461,7 @@ function select() {
   while (entry && entry.open) {
     const inside = entry.open();
     if (inside.length > 1 || entry.page) {
-      scan.levels.push({ build: withBack(entry), entry, index: startOf(inside), steps: 0, page: Boolean(entry.page) });
+      scan.levels.push({ build: withBack(entry), entry, index: startOf(inside, Boolean(entry.list)), steps: 0, page: Boolean(entry.page) });
       beep(990, 60);
       show();
       return;
