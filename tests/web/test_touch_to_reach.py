@@ -75,6 +75,11 @@ def test_touch_the_can_go_above_it_and_the_wall_is_out_of_reach(browser, kitchen
         # The 3D view draws the camera's points.
         viewer = page.locator(".viewer")
         wait_until(lambda: int(viewer.get_attribute("data-points") or 0) > 1000, timeout=15)
+        # A still kitchen: the page names the cloud it has, and is told it has it (nothing to draw again).
+        clouds: list[int] = []
+        page.on("response", lambda r: clouds.append(r.status) if r.url.endswith(f"/cameras/{CAMERA}/cloud") else None)
+        wait_until(lambda: page.wait_for_timeout(100) or clouds.count(304) >= 2, timeout=10,
+                   message=lambda: f"the page's cloud requests were answered {clouds}")
 
         # The can's side facing the camera: its centre pushed towards the camera by its radius.
         cam_xy = np.array(info.pose[:2])

@@ -18,7 +18,7 @@ from asibot.bus import Bus
 from asibot.testing import wait_until
 from asibot.web import world as world_module
 
-from ..common.scenes import CAN_TOP, CAN_XY, COUNTER, Scene, kitchen_info, kitchen_scene, pixel_of
+from ..common.scenes import CAN_R, CAN_TOP, CAN_XY, COUNTER, Scene, kitchen_info, kitchen_scene, pixel_of
 from .conftest import API_ROBOT as ROBOT, API_START as START, settle
 
 CAMERA = "kitchen"
@@ -93,6 +93,21 @@ def test_the_cloud_is_the_kitchen_in_the_robot_frame_in_the_camera_colours(web, 
     on_can = np.hypot(xyz[:, 0] - CAN_XY[0], xyz[:, 1] - CAN_XY[1]) < 0.034
     assert on_can.sum() >= 5 and xyz[~on_can, 2] == pytest.approx(COUNTER, abs=1e-3)
     assert rgb.mean(axis=0) == pytest.approx(RED, abs=6)
+
+
+def test_the_same_cloud_again_is_a_304_and_a_changed_one_has_a_new_tag(web, camera, api):
+    """A still world's camera sends the same pictures again: the cloud keeps its ETag, a page
+    that names it gets a 304 and draws nothing again; a changed picture is a new cloud."""
+    show(web, camera, kitchen_scene())
+    first = api.get(f"{BASE}/cloud")
+    tag = first.headers["etag"]
+    show(web, camera, kitchen_scene())                       # the same pictures, new frames
+    again = api.get(f"{BASE}/cloud", headers={"If-None-Match": tag})
+    assert again.status_code == 304 and again.headers["etag"] == tag and again.content == b""
+    assert api.get(f"{BASE}/cloud").content == first.content      # without the tag: the cloud
+    show(web, camera, Scene(cylinders=[(CAN_XY[0] + 0.05, CAN_XY[1], CAN_R, COUNTER, CAN_TOP)]))   # the can moved
+    changed = api.get(f"{BASE}/cloud", headers={"If-None-Match": tag})
+    assert changed.status_code == 200 and changed.headers["etag"] != tag and changed.content != first.content
 
 
 def test_touching_the_can_offers_above_it_and_reach_it_with_their_joints(web, camera, api):

@@ -261,11 +261,13 @@ class SimService(Service):
                     # it is: 60 % of a core against 23 % in the kitchen), as a Gazebo camera
                     # sensor is inactive without subscribers. The first frame warms the GL contexts.
                     if "depth" in CAMERA_KINDS[c.name] and (first or p["depth"].matching()):
-                        p["depth"].put(m.DepthImage(depth=c.depth(data, opt.depth_method), stamp=stamp))
-                        self._rendered["depth"] += 1
+                        depth, rendered = c.depth_frame(data, opt.depth_method)
+                        p["depth"].put(m.DepthImage(depth=depth, stamp=stamp))
+                        self._rendered["depth"] += rendered
                     if "rgb" in CAMERA_KINDS[c.name] and (first or p["rgb"].matching()):
-                        p["rgb"].put(c.rgb_jpeg(data, stamp))
-                        self._rendered["rgb"] += 1
+                        rgb, rendered = c.rgb_frame(data, stamp)
+                        p["rgb"].put(rgb)
+                        self._rendered["rgb"] += rendered
                 self._frames += 1
                 if first:
                     first = False

@@ -38,9 +38,14 @@ def depth_cameras(robot: RobotId, request: Request) -> dict:
             summary="what a depth camera sees, as coloured points in the robot's frame (binary: uint32 N, "
                     "N x 3 float32 x y z in m, N x 3 uint8 r g b)")
 async def cloud(robot: RobotId, name: CameraName, request: Request) -> Response:
-    count, body = await off_loop(web_of(request).world.cloud, robot, name)
-    return Response(body, media_type="application/octet-stream",
-                    headers={"Cache-Control": "no-store", "X-Point-Count": str(count)})
+    count, body, version = await off_loop(web_of(request).world.cloud, robot, name)
+    # The page asks a few times a second and names the cloud it has; the same cloud again (a
+    # still world) is a 304, and the page draws nothing again (ETag, If-None-Match: RFC 9110).
+    tag = f'"{version}"'
+    headers = {"Cache-Control": "no-store", "ETag": tag}
+    if request.headers.get("if-none-match") == tag:
+        return Response(status_code=304, headers=headers)
+    return Response(body, media_type="application/octet-stream", headers={**headers, "X-Point-Count": str(count)})
 
 
 @router.post("/robots/{robot}/cameras/{name}/touch",

@@ -52,6 +52,7 @@ class Live:
         self.views = views
         self.pages: set[Page] = set()
         self._changed: set[str] = set()
+        self._sent: dict[str, str] = {}     # robot -> the last view pushed
         self._lock = threading.Lock()
         self._loop: asyncio.AbstractEventLoop | None = None
 
@@ -87,7 +88,13 @@ class Live:
                     view = self.view_of(robot_id)
                 except KeyError:
                     continue
-                self._broadcast(json.dumps({"type": "robot", "robot": view}))
+                text = json.dumps({"type": "robot", "robot": view})
+                # A still robot sends the same state 100 times a second: the page has it already
+                # (a new page gets every robot when it attaches), and redrawing it costs a
+                # tablet's page a sixth of a core for nothing.
+                if text != self._sent.get(robot_id):
+                    self._sent[robot_id] = text
+                    self._broadcast(text)
 
     async def attach(self, socket: WebSocket) -> Page:
         """A new page: it first gets every robot, then the changes."""

@@ -14,6 +14,8 @@ same code, so a real camera and the simulated one behave the same once calibrate
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import math
 import struct
 import threading
@@ -44,6 +46,29 @@ TOOL_DOWN = (180.0, 0.0)
 CLOUD_HEADER = struct.Struct("<I")
 
 
+@dataclass(frozen=True)
+class _Cloud:
+    """A cloud made, and what it was made from."""
+    seq: int                    # the depth image's number as kept
+    pose: tuple                 # the camera's pose, rounded
+    image: np.ndarray           # the depth image
+    jpeg: bytes                 # the colour picture
+    count: int
+    body: bytes
+    version: int
+
+
+def _decoded(jpeg: bytes) -> np.ndarray | None:
+    """A colour picture decoded; None without one (or a broken frame: grey points, no colour
+    name, this once)."""
+    if not jpeg:
+        return None
+    try:
+        return depth.decode_rgb(jpeg)
+    except depth.DepthError:
+        return None
+
+
 @dataclass
 class _Kept:
     """The newest message of one stream of one camera, undecoded."""
@@ -65,7 +90,8 @@ class World:
         self.tool_point = tool_point
         self._lock = threading.Lock()
         self._kept: dict[tuple[str, str, str], _Kept] = {}
-        self._clouds: dict[tuple[str, str], tuple[tuple, int, bytes]] = {}   # (image, pose), N, body
+        self._clouds: dict[tuple[str, str], _Cloud] = {}
+        self._cloud_versions = itertools.count(1)
         self._seen_marks: dict[tuple[str, str], np.ndarray] = {}   # a calibration mark touched, not yet paired
         # A CameraInfo costs no rendering: it is kept all the time, the depth images on demand.
         bus.subscribe_raw(keys.every_robot(keys.camera_info, "*"), self._keeper("info"), maxsize=2)
@@ -158,37 +184,39 @@ class World:
                                           "(Calibrate the camera, beside its picture).") from None
 
     # --- the point cloud -------------------------------------------------------------------
-    def cloud(self, robot: str, name: str) -> tuple[int, bytes]:
-        """(N, the cloud's wire form: see CLOUD_HEADER) of the newest depth image; made once
-        per image and pose, however many pages ask."""
+    def cloud(self, robot: str, name: str) -> tuple[int, bytes, int]:
+        """(N, the cloud's wire form: see CLOUD_HEADER, its version) of the newest depth image;
+        made once per image and pose, however many pages ask. The version changes only when
+        the cloud does: a still world's camera sends the same pictures again, and a page that
+        has this version draws nothing again."""
         info = self._info(robot, name)
         pose = self.pose(robot, name, info)
         seq, image = self._depth(robot, name)
-        stamp = (seq, tuple(np.round(pose, 9).ravel()))
+        where = tuple(np.round(pose, 9).ravel())
         with self._lock:
             cached = self._clouds.get((robot, name))
-        if cached is not None and cached[0] == stamp:
-            return cached[1], cached[2]
-        rgb = self._rgb(robot, name)
-        try:
-            xyz, colours = depth.cloud(image, rgb, info, pose)
-        except depth.DepthError as exc:
-            raise RpcError("unavailable", str(exc)) from None
-        body = CLOUD_HEADER.pack(len(xyz)) + xyz.astype("<f4").tobytes() + colours.tobytes()
+        if cached is not None and cached.seq == seq and cached.pose == where:
+            return cached.count, cached.body, cached.version
+        picture = self.cameras.newest(robot, name)
+        jpeg = b"" if picture is None else picture.jpeg
+        if (cached is not None and cached.pose == where and cached.jpeg == jpeg
+                and np.array_equal(cached.image, image)):
+            made = dataclasses.replace(cached, seq=seq)
+        else:
+            try:
+                xyz, colours = depth.cloud(image, _decoded(jpeg), info, pose)
+            except depth.DepthError as exc:
+                raise RpcError("unavailable", str(exc)) from None
+            body = CLOUD_HEADER.pack(len(xyz)) + xyz.astype("<f4").tobytes() + colours.tobytes()
+            made = _Cloud(seq, where, image, jpeg, len(xyz), body, next(self._cloud_versions))
         with self._lock:
-            self._clouds[(robot, name)] = (stamp, len(xyz), body)
-        return len(xyz), body
+            self._clouds[(robot, name)] = made
+        return made.count, made.body, made.version
 
     def _rgb(self, robot: str, name: str) -> np.ndarray | None:
-        """The camera's newest colour picture, decoded; None without one (or a broken frame:
-        grey points, no colour name, this once)."""
+        """The camera's newest colour picture, decoded; None without one."""
         picture = self.cameras.newest(robot, name)
-        if picture is None:
-            return None
-        try:
-            return depth.decode_rgb(picture.jpeg)
-        except depth.DepthError:
-            return None
+        return None if picture is None else _decoded(picture.jpeg)
 
     # --- touch to reach --------------------------------------------------------------------
     def touch(self, robot: str, name: str, u: float, v: float) -> dict[str, Any]:

@@ -8,8 +8,9 @@ export class Refused extends Error {}
 const SESSION = document.querySelector('meta[name=asibot-session]')?.content || '';
 const SESSION_REFUSED = 4403;
 
-async function request(method, path, body, binary = false) {
+async function request(method, path, body, binary = false, tag = null) {
   const init = { method, headers: { 'X-Asibot-Session': SESSION } };
+  if (tag) { init.headers['If-None-Match'] = tag; init.cache = 'no-store'; }
   if (body instanceof FormData) {
     init.body = body;
   } else if (body !== undefined) {
@@ -23,7 +24,8 @@ async function request(method, path, body, binary = false) {
     throw new Refused('The server does not answer. Is `asibot up` still running?');
   }
   const type = reply.headers.get('Content-Type') || '';
-  if (binary && reply.ok) return reply.arrayBuffer();
+  if (binary && reply.status === 304) return { data: null, tag };
+  if (binary && reply.ok) return { data: await reply.arrayBuffer(), tag: reply.headers.get('ETag') };
   const data = type.includes('application/json') ? await reply.json() : await reply.text();
   if (!reply.ok) throw new Refused((data && data.message) || `The server answered ${reply.status}.`);
   return data;
@@ -112,7 +114,9 @@ export const paths = {
 
 export const api = {
   get: (path) => request('GET', path),
-  bytes: (path) => request('GET', path, undefined, true),   // an ArrayBuffer (the point cloud)
+  // { data: an ArrayBuffer (the point cloud), tag: its ETag }; data is null when the server still
+  // has the one tagged `tag` (304: nothing to draw again).
+  bytes: (path, tag = null) => request('GET', path, undefined, true, tag),
   post: (path, body = {}) => request('POST', path, body),
   put: (path, body) => request('PUT', path, body),
   del: (path) => request('DELETE', path),

@@ -4,7 +4,8 @@
 // buttons that turn and zoom the view, so dragging is never the only way (WCAG 2.5.7, 2.1.1).
 // "Show camera points" draws what the robot's depth cameras see, as coloured points in the
 // robot's frame (the server's cloud: services/web/asibot/web/world.py), refreshed a few times a
-// second while the view is on screen; the picture's data-points says how many are drawn.
+// second while the view is on screen (each ask names the cloud drawn, and a still world's is not
+// sent or drawn again); the picture's data-points says how many are drawn.
 import * as THREE from '/static/vendor/three.js';
 import { api, chosenRobot, onChange, paths } from './api.js';
 import { el, notify } from './ui.js';
@@ -149,10 +150,11 @@ export class RobotViewer {
         if (!this.depthCameras.names.includes(name)) { this.cloudFrame.remove(this.clouds.get(name)); this.clouds.delete(name); }
       }
       for (const name of this.depthCameras.names) {
-        const buffer = await api.bytes(paths.robot.cloud(robot, name));
+        const points = this.clouds.get(name);
+        const { data, tag } = await api.bytes(paths.robot.cloud(robot, name), points ? points.userData.tag : null);
         // Paused while the answer came: the picture keeps what it showed (CI: "the paused picture moved").
         if (robot !== this.robotId || this.paused) return;
-        this.drawCloud(name, buffer);
+        if (data) this.drawCloud(name, data, tag);
       }
     } catch (e) {
       this.depthCameras.at = 0;   // a camera stopped, or was never calibrated: ask again next time
@@ -162,7 +164,7 @@ export class RobotViewer {
   }
 
   // The server's cloud: uint32 N, N x 3 float32 x y z, N x 3 uint8 r g b (world.CLOUD_HEADER).
-  drawCloud(name, buffer) {
+  drawCloud(name, buffer, tag) {
     const n = new DataView(buffer).getUint32(0, true);
     const xyz = new Float32Array(buffer, 4, n * 3);
     const rgb = new Uint8Array(buffer, 4 + n * 12, n * 3);
@@ -173,6 +175,7 @@ export class RobotViewer {
     geometry.setAttribute('position', new THREE.BufferAttribute(xyz.slice(), 3));
     geometry.setAttribute('color', new THREE.BufferAttribute(rgb.slice(), 3, true));
     points.geometry = geometry;
+    points.userData.tag = tag;
     let total = 0;
     for (const p of this.clouds.values()) total += p.geometry.getAttribute('position').count;
     this.picture.dataset.points = String(total);
