@@ -186,9 +186,11 @@ def test_the_ring_stays_on_a_step_when_the_page_draws_it_again(page, kitchen):
 def test_a_dozen_programs_are_one_entry_that_a_select_opens(page, kitchen):
     """Block scanning: a person with twelve programs passed them row by row on the way to "New:
     Pick it up…" (one press each: 19 presses against 8 with one program). A long list is one
-    entry, "Programs (N)", that the ring passes in one press and a select opens into its rows."""
+    entry, "Programs (N)", that the ring passes in one press and a select opens into its rows;
+    not the Launcher's tasks, which are what that page is for."""
     from playwright.sync_api import expect
     made = [f"errand_{k:02d}" for k in range(12)]
+    chores = [f"chore_{k:02d}" for k in range(25)]
     for name in made:
         http(kitchen, "POST", "/api/programs", {"name": name})
     try:
@@ -214,6 +216,20 @@ def test_a_dozen_programs_are_one_entry_that_a_select_opens(page, kitchen):
         expect(page.get_by_role("heading", name=f"{made[9]}.py")).to_be_visible(timeout=10000)
         # one press more than when each program was a row of the page: the select that opens them
         assert switch.count <= listed + 2, switch.count       # 14 with 13 programs
+
+        # The Launcher's tasks are what its page is for: row by row, however many, never a block.
+        for k, task in enumerate(chores):
+            http(kitchen, "PUT", f"/api/tasks/{task}", {"program": made[k % len(made)], "words": [], "icon": "can.svg"})
+        with_settings(page, "#launcher", ".task-button", enabled=True)
+        page.get_by_role("button", name=f"Launch {chores[-1]}").wait_for(timeout=10000)
+        rows = page.evaluate("new Set([...document.querySelectorAll('.task-button')].map((b) => b.getBoundingClientRect().top)).size")
+        assert rows > 4, f"the test needs more than four rows of tasks, not {rows}"
+        switch = Presses(page)
+        switch.start()
+        switch.until(lambda now: any(f"Launch {chores[0]}" in n for n in now))
+        assert ring_label(page).startswith("Row: Launch"), ring_label(page)
     finally:
+        for task in chores:
+            kitchen.web("DELETE", f"/api/tasks/{task}")
         for name in made:
             kitchen.web("DELETE", f"/api/programs/{name}")

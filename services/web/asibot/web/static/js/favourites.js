@@ -84,7 +84,7 @@ function nowPanel() {
 }
 
 export function favouritesPanel() {
-  const tiles = el('div', { class: 'launcher favourites', role: 'group', 'aria-label': 'Your tasks and places' });
+  const tiles = el('div', { class: 'launcher favourites', role: 'group', 'aria-label': 'Your tasks and places', dataset: { scan: 'rows' } });
   const notes = el('div', { class: 'muted' });
   const now = nowPanel();
   // No message on success: "Now" says it, beside the tiles, and nothing on the page moves.

@@ -15,6 +15,7 @@
 // to <page>" follows the stop and puts the page and the ring back as they were. A long list (a
 // labelled group of more than BLOCK_ROWS rows: a dozen programs) is one entry, "Programs (12)",
 // that a select opens (block scanning, as AAC grids do): passing it costs one press, not twelve.
+// A list that is what its page is for (the Launcher's tasks) says data-scan="rows": never a block.
 //
 // Controls that act while held (jog "Hold to move") take the 'scan:select' event: they start, and
 // the next press of any switch stops them (select-to-start, select-to-stop). When scanning is off
@@ -91,7 +92,7 @@ function itemLines(nodes) { return nodes.map(item); }
 // The long lists among `nodes`: labelled groups of more than BLOCK_ROWS rows, outermost first.
 function longLists(nodes) {
   const lists = [];
-  for (const group of document.querySelectorAll('[role=group][aria-label]')) {
+  for (const group of document.querySelectorAll('[role=group][aria-label]:not([data-scan=rows])')) {
     if (lists.some((l) => l.contains(group))) continue;
     const inside = nodes.filter((n) => group.contains(n));
     if (inside.length > BLOCK_ROWS && rowsOf(inside).length > BLOCK_ROWS) lists.push(group);

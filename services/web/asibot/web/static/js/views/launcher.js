@@ -6,7 +6,8 @@ import { outputPanel, stopProgramButton } from './program.js';
 
 export default {
   mount(root) {
-    const grid = el('div', { class: 'launcher', role: 'group', 'aria-label': 'Tasks' });
+    // The tasks are what this page is for: scanned row by row however many (never one block).
+    const grid = el('div', { class: 'launcher', role: 'group', 'aria-label': 'Tasks', dataset: { scan: 'rows' } });
     const output = outputPanel();
     const refresh = async () => {
       const { tasks } = await api.get(paths.tasks);
