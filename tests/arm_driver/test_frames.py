@@ -74,6 +74,9 @@ def test_target_position_rpdo_and_sync(rig):
     q2 = rig.cfg.joints[1].units.to_counts(math.radians(10))
     assert q2 == 18204                         # 10 deg x 1820.44 counts/deg
     m.cycle({1: 0, 2: q2})
+    # A period under way as the set-point changed may still deliver its old one: from the first
+    # new one on, only new ones (CI: one old 0x402 seen after the clear, under load).
+    wait_until(lambda: (0x402, "1c 47 00 00") in frames(rig, 0x402))
     rig.sniffer.clear()
     # Set-points and SYNC repeat every period without further calls; the master's heartbeat too.
     wait_until(lambda: len(frames(rig, 0x080)) >= 3 and frames(rig, 0x77F))
