@@ -100,6 +100,9 @@ class Live:
         """A new page: it first gets every robot, then the changes."""
         page = Page(socket)
         self.pages.add(page)
+        # Its snapshot may be newer than what was pushed last: push every robot's next view, or
+        # a robot back where it was at the last push would leave this page on the snapshot.
+        self._sent.clear()
         page.offer(json.dumps({"type": "hello", "page": page.id}))
         page.offer(json.dumps({"type": "robots", "robots": self.views()}))
         return page
