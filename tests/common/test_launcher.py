@@ -22,20 +22,24 @@ ROOT = Path(__file__).resolve().parents[2]
 COMPOSE = ROOT / "compose.yaml"
 
 
-def test_compose_is_valid_for_every_profile():
-    assert shutil.which("docker-compose"), "install Debian's docker-compose (the .ci/run script does)"
+#: Compose v2, which implements the Compose specification: the Docker CLI's plugin.
+DOCKER_COMPOSE = ["docker", "compose", "-f", str(COMPOSE)]
+
+
+def test_compose_is_compose_v2_and_valid_for_every_profile():
+    assert shutil.which("docker"), "install Docker's client: ./bootstrap does (Debian's docker.io)"
+    version = subprocess.run([*DOCKER_COMPOSE, "version", "--short"], capture_output=True, text=True)
+    assert version.returncode == 0 and version.stdout.startswith("2."), \
+        f"`docker compose` is not Compose v2 ({version.stdout}{version.stderr}): ./bootstrap installs it"
     for profile in compose.PROFILES:
-        subprocess.run(["docker-compose", "-f", str(COMPOSE), "--profile", profile, "config", "-q"],
-                       check=True)
+        subprocess.run([*DOCKER_COMPOSE, "--profile", profile, "config", "-q"], check=True)
 
 
 @pytest.mark.parametrize("profile", compose.PROFILES)
 def test_launcher_and_compose_agree(profile):
-    out = subprocess.run(["docker-compose", "-f", str(COMPOSE), "--profile", profile, "config"],
+    out = subprocess.run([*DOCKER_COMPOSE, "--profile", profile, "config"],
                          check=True, capture_output=True, text=True).stdout
-    # docker-compose 1.29 `config` prints every service; keep the profile's, as `up` would.
-    resolved = {n: s for n, s in yaml.safe_load(out)["services"].items()
-                if not s.get("profiles") or profile in s["profiles"]}
+    resolved = yaml.safe_load(out)["services"]
     ours = {s.name: s for s in compose.select(compose.load(COMPOSE), profile)}
     assert set(ours) == set(resolved)
     for name, spec in ours.items():
@@ -47,7 +51,7 @@ def test_launcher_and_compose_agree(profile):
 def test_variables_are_substituted_like_docker_compose(monkeypatch):
     monkeypatch.setenv("ASIBOT_ARM_CAN", "pcan:PCAN_USBBUS1")
     monkeypatch.delenv("ASIBOT_PIONEER_PORT", raising=False)
-    out = subprocess.run(["docker-compose", "-f", str(COMPOSE), "--profile", "real", "config"],
+    out = subprocess.run([*DOCKER_COMPOSE, "--profile", "real", "config"],
                          check=True, capture_output=True, text=True).stdout
     resolved = yaml.safe_load(out)["services"]
     ours = compose.load(COMPOSE)
