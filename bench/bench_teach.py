@@ -43,8 +43,10 @@ def served(url: str) -> bool:
         return False
 
 
-def one_way(browser, stack, name: str) -> tuple[int, float, bool, list[str]]:
-    """(actions, seconds from the first load to the run's end, whether the can was lifted, the actions)."""
+def one_way(browser, stack, name: str, to_the_end: bool = True) -> tuple[int, float, bool, list[str]]:
+    """(actions, seconds from the first load to the run's end, whether the can was lifted, the actions).
+    Not `to_the_end` (the smoke run): the run is stopped once it has started, the can left where
+    it is: tests/web/test_teach_by_touch.py takes the same flow to the can lifted."""
     start = reset(stack)
     stack.web("DELETE", "/api/tasks/Give%20me%20the%20red%20can")
     begun = time.time()
@@ -60,6 +62,10 @@ def one_way(browser, stack, name: str) -> tuple[int, float, bool, list[str]]:
                     return bool(p) and math.dist(p[:3], point[:3]) < 0.003 and robot.get("state") != "moving"
                 wait_until(there, timeout=60, interval=0.1, message=f"the arm never reached {point}")
             by_typing(page, stack, act, arm_at)
+        if not to_the_end:
+            wait_until(lambda: stack.web("GET", "/api/run")[1].get("running"), timeout=30, interval=0.1,
+                       message="the task's run did not start")
+            stack.web("POST", "/api/run/stop")
         run_ends(page, begun)
         took = time.time() - begun
     lifted = can_position(stack)[2] - start[2] > 0.08
@@ -69,8 +75,10 @@ def one_way(browser, stack, name: str) -> tuple[int, float, bool, list[str]]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help=QUICK_HELP)
-    # The smoke run teaches one way, by touch: the typed reference drives the same page, stack and run.
-    ways = ("touch",) if ap.parse_args().quick else ("typed", "touch")
+    # The smoke run teaches one way, by touch, and stops the run once started: the typed reference
+    # drives the same page, stack and run.
+    quick = ap.parse_args().quick
+    ways = ("touch",) if quick else ("typed", "touch")
     from playwright.sync_api import sync_playwright
     done = {}
     with tempfile.TemporaryDirectory() as folder:
@@ -82,7 +90,7 @@ def main() -> None:
                 browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
                 try:
                     for way in ways:
-                        done[way] = one_way(browser, stack, way)
+                        done[way] = one_way(browser, stack, way, to_the_end=not quick)
                 finally:
                     browser.close()
         finally:

@@ -7,6 +7,7 @@ What a page (or anything else) can send: every action answers JSON; every bad in
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -66,6 +67,40 @@ def test_the_pages_files_are_asked_again_after_an_upgrade_and_go_out_compressed(
     assert "content-encoding" not in plain.headers and plain.text.startswith("//")
     # the API's answers are not held back by a compressor (a camera's stream goes out frame by frame)
     assert "content-encoding" not in api.get("/api/robots", headers={"Accept-Encoding": "gzip"}).headers
+    assert first.content == plain.content                       # (the client takes the gzip off)
+    assert first.headers["etag"] == plain.headers["etag"] and first.headers["vary"] == "Accept-Encoding"
+    assert first.headers["content-type"] == plain.headers["content-type"]
+
+
+def test_a_changed_file_goes_out_compressed_as_it_is_now(tmp_path, monkeypatch):
+    """Each version of a file is compressed once: an edit is served as edited, never the old gzip."""
+    from fastapi import FastAPI
+    from fastapi.testclient import TestClient
+
+    from asibot.web.app import Static
+    (tmp_path / "a.js").write_text("// one\n" + "x = 1;\n" * 400)
+    app = FastAPI()
+    app.mount("/static", Static(directory=tmp_path))
+    client = TestClient(app)
+    before = client.get("/static/a.js", headers={"Accept-Encoding": "gzip"})
+    assert before.headers["content-encoding"] == "gzip" and before.content.startswith(b"// one")
+    (tmp_path / "a.js").write_text("// two\n" + "x = 2;\n" * 500)
+    after = client.get("/static/a.js", headers={"Accept-Encoding": "gzip"})
+    assert after.headers["content-encoding"] == "gzip" and after.content.startswith(b"// two")
+    assert after.headers["etag"] != before.headers["etag"]
+    assert client.get("/static/a.js", headers={"Accept-Encoding": "gzip", "Range": "bytes=0-5"}).content == b"// two"
+
+
+def test_the_page_names_every_module_main_js_imports_up_front(api):
+    html = api.get("/").text
+    preloaded = re.findall(r'<link rel="modulepreload" href="([^"]+)">', html)
+    # main.js's own imports, and theirs (choose.js comes through scanning.js and others)
+    for module in ("api.js", "connection.js", "scanning.js", "ui.js", "wizard.js", "choose.js", "settings.js"):
+        assert f"/static/js/{module}" in preloaded, module
+    assert len(preloaded) == len(set(preloaded))
+    assert not any("/views/" in url or "vendor" in url for url in preloaded)  # a tab's code comes with its tab
+    for url in preloaded:
+        assert api.get(url).status_code == 200, url
 
 
 def test_robots_come_from_the_bus_with_their_state(web, api):

@@ -15,7 +15,7 @@ import pytest
 from asibot import keys
 from asibot.messages import ArmState
 from asibot.poses import POINT_AXIS_MEANINGS
-from asibot.testing import wait_until
+from asibot.testing import PRETEND_GPU, wait_until
 
 from .conftest import screenshot
 
@@ -308,6 +308,28 @@ def test_the_3d_view_draws_the_robot_and_a_ghost_of_the_target(page, kitchen):
     page.get_by_role("button", name="Show target").click()
     wait_until(lambda: robot_pixels("orange") > 1000, timeout=10)
     screenshot(page, "3d-ghost")
+
+
+@pytest.mark.parametrize("gpu", [False, True], ids=["software", "graphics card"])
+def test_without_a_graphics_card_the_3d_view_is_drawn_without_antialiasing(browser, kitchen, gpu):
+    """Drawn in software (SwiftShader here, llvmpipe on a Linux without a GPU driver), antialiasing
+    and 25 pictures a second cost the CPU the robot's services need (bench/bench_page_cpu.py): the
+    view draws plainer there, and as before where a graphics card draws it."""
+    context = browser.new_context(viewport={"width": 1366, "height": 900})
+    if gpu:
+        context.add_init_script(PRETEND_GPU)
+    try:
+        page = context.new_page()
+        page.goto(kitchen.web_url + "#joint")
+        page.wait_for_selector(".viewer canvas", timeout=15000)
+        assert page.get_attribute(".viewer", "data-renderer") == ("gpu" if gpu else "software")
+        antialiased = page.evaluate("""() => { const c = document.querySelector('.viewer canvas');
+            return (c.getContext('webgl2') || c.getContext('webgl')).getContextAttributes().antialias; }""")
+        assert antialiased is gpu
+        wait_until(lambda: page.evaluate(ARM_PIXELS) > 500, timeout=15,
+                   message=lambda: f"the 3D view drew {page.evaluate(ARM_PIXELS)} pixels of the arm")
+    finally:
+        context.close()
 
 
 def test_unreachable_target_answers_in_the_page(page):

@@ -79,6 +79,17 @@ def scheduling_delay(samples: int = 20, period: float = 0.005) -> float:
     return worst
 
 
+#: A browser script (Playwright's `add_init_script`) that makes a page believe a graphics card
+#: draws its WebGL: the renderer's name is all the 3D view asks (viewer3d.js). On these machines
+#: Chromium has none and draws in software.
+PRETEND_GPU = """(() => {
+  for (const proto of [WebGLRenderingContext.prototype, WebGL2RenderingContext.prototype]) {
+    const real = proto.getParameter;
+    proto.getParameter = function (what) { return what === 0x9246 ? 'Pretended GPU' : real.call(this, what); };
+  }
+})();"""
+
+
 #: A program that escapes its process group two ways, a child that calls setsid() and a daemon
 #: (double fork, setsid, orphaned), both marked with `{marker}` in their command lines; it says
 #: "both up" once both run, then runs `{then}`. What the sandbox's Stop must end.

@@ -11,6 +11,7 @@ from importlib import resources
 
 import asyncio
 import contextlib
+import gzip
 import json
 import logging
 import os
@@ -20,8 +21,9 @@ from typing import Any
 
 from fastapi import FastAPI, WebSocket, WebSocketDisconnect
 from fastapi.openapi.docs import get_swagger_ui_html
-from fastapi.responses import HTMLResponse, JSONResponse, Response
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
+from starlette.datastructures import Headers
 from starlette.middleware.gzip import GZipMiddleware
 from pydantic import StrictBool
 
@@ -39,6 +41,7 @@ from asibot.web.fleet import Fleet
 from asibot.web.live import Live
 from asibot.web.models import Strict
 from asibot.web.motion import Motion
+from asibot.web.preload import ModuleGraph
 from asibot.web.runner import ProgramRunner
 from asibot.web.tasks_bus import TaskDesk
 from asibot.web.userdata import UserData
@@ -50,6 +53,8 @@ from asibot.web.world import World
 STATIC = Path(os.environ.get("ASIBOT_WEB_STATIC") or str(resources.files("asibot.web") / "static"))
 #: The line of index.html after which the page's session token is written.
 CHARSET = '<meta charset="utf-8">'
+#: The page's script; the modules it imports are named after it, to be fetched at once.
+MAIN_SCRIPT = '<script type="module" src="/static/js/main.js"></script>'
 #: Largest request body, bytes; uploads have their own, larger limits.
 BODY_LIMIT = 1024 * 1024
 UPLOAD_PATHS = {"/api/icons": ICON_LIMIT + 64 * 1024, "/api/import": IMPORT_LIMIT + 64 * 1024}
@@ -194,11 +199,15 @@ def create_app(web: Web) -> guard.PageGuard:
             if page.holding:  # a closed tab must not leave a hold-to-move running
                 await asyncio.to_thread(stop_quietly, web.motion, page.holding, "a hold")
 
+    modules = ModuleGraph(STATIC, "/static", "js/main.js")
+
     @app.get("/", include_in_schema=False)
     def index() -> HTMLResponse:
         # Read each time (edit and reload); it carries the session token, so no cache keeps it.
+        preloads = "".join(f'\n  <link rel="modulepreload" href="{url}">' for url in modules.urls())
         page = (STATIC / "index.html").read_text(encoding="utf-8").replace(
-            CHARSET, f'{CHARSET}\n  <meta name="{guard.META}" content="{web.session}">', 1)
+            CHARSET, f'{CHARSET}\n  <meta name="{guard.META}" content="{web.session}">', 1).replace(
+            MAIN_SCRIPT, MAIN_SCRIPT + preloads, 1)
         return HTMLResponse(page, headers={"Cache-Control": "no-store"})
 
     @app.get("/docs", include_in_schema=False)
@@ -214,19 +223,52 @@ def create_app(web: Web) -> guard.PageGuard:
 
 class Static(StaticFiles):
     """The page's files, asked again at every load (a 304 when unchanged, by their ETag): after an
-    upgrade the browser runs the new JavaScript, never a guess at how long the old one stays fresh."""
+    upgrade the browser runs the new JavaScript, never a guess at how long the old one stays fresh.
+    gzipped for browsers that take it, each version of a file once (three.js took 60 ms to
+    compress, at every load of every page), as a web server's precompressed files are."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._gzipped: dict[str, tuple[str, bytes]] = {}    # path -> (its ETag, its gzip)
 
     def file_response(self, *args: Any, **kwargs: Any) -> Response:
         response = super().file_response(*args, **kwargs)
         response.headers["Cache-Control"] = "no-cache"
         return response
 
+    async def get_response(self, path: str, scope: Any) -> Response:
+        response = await super().get_response(path, scope)
+        if not (isinstance(response, FileResponse) and response.status_code == 200 and scope["method"] == "GET"
+                and wants_gzip(scope) and compressible(response)):
+            return response
+        full_path, tag = str(response.path), response.headers["etag"]
+        cached = self._gzipped.get(full_path)
+        if cached is None or cached[0] != tag:
+            body = await asyncio.to_thread(lambda: gzip.compress(Path(full_path).read_bytes(), 9, mtime=0))
+            cached = self._gzipped[full_path] = (tag, body)
+        headers = {k: v for k, v in response.headers.items() if k not in ("content-length", "content-type")}
+        return Response(cached[1], media_type=response.media_type,
+                        headers={**headers, "Content-Encoding": "gzip", "Vary": "Accept-Encoding"})
+
+
+def wants_gzip(scope: Any) -> bool:
+    return "gzip" in Headers(scope=scope).get("accept-encoding", "") and "range" not in Headers(scope=scope)
+
+
+def compressible(response: FileResponse) -> bool:
+    """Text, scripts, JSON and SVG of 1 KiB or more; pictures are compressed already."""
+    kind = response.media_type or ""
+    size = int(response.headers.get("content-length", "0"))
+    return size >= 1024 and (kind.startswith("text/") or kind in (
+        "application/javascript", "text/javascript", "application/json", "image/svg+xml"))
+
 
 class Compressed:
-    """gzip for the page's files and the API's schema, for browsers that take it. Only there: a
-    camera's MJPEG stream must go out frame by frame, never held in a compressor's buffer."""
+    """gzip for the API's schema and its page, for browsers that take it (the page's files are
+    gzipped by Static, once a version). Only there: a camera's MJPEG stream must go out frame by
+    frame, never held in a compressor's buffer."""
 
-    PATHS = ("/static/", "/openapi.json", "/docs")
+    PATHS = ("/openapi.json", "/docs")
 
     def __init__(self, app: Any) -> None:
         self.app, self.gzip = app, GZipMiddleware(app, minimum_size=1024)

@@ -97,6 +97,10 @@ function feedState() {
 }
 
 async function start() {
+  // The first view's module comes while the config does (show() below takes it from the
+  // browser's module map); a failure is left to show(), which says so.
+  const first = location.hash.slice(1) || 'home';
+  load(VIEWS.find((v) => v.id === first) || VIEWS[0]).catch(() => {});
   state.config = await api.get(paths.config);
   tabs();
   mountConnection(document.getElementById('connection'));

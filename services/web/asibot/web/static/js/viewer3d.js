@@ -17,9 +17,25 @@ const CAMERAS_MS = 5000;
 const POINTS = new THREE.PointsMaterial({ size: 0.03, vertexColors: true });
 const CLOUD_SHOWN = 'asibot.cloud';
 // Frames at least this far apart (25 a second), ms; a joint that moved less than SEEN_DEG is not redrawn.
+// Drawn in software (no graphics card: SwiftShader, llvmpipe), a frame costs the CPU that the
+// robot's own services need: 10 a second, without antialiasing, at one pixel a pixel.
 const FRAME_MS = 40;
+const SOFTWARE_FRAME_MS = 100;
+const SOFTWARE_RENDERER = /swiftshader|llvmpipe|softpipe|software|basic render/i;
 const SEEN_DEG = 0.05;
 const GHOST = new THREE.MeshStandardMaterial({ color: 0xff9f1a, transparent: true, opacity: 0.35, depthWrite: false });
+
+// Whether this browser draws WebGL without a graphics card, asked of a throwaway context (the
+// answer decides how the real one is made: antialiasing cannot be turned off later).
+function drawnInSoftware() {
+  const gl = document.createElement('canvas').getContext('webgl2') || document.createElement('canvas').getContext('webgl');
+  if (!gl) return false;
+  const info = gl.getExtension('WEBGL_debug_renderer_info');
+  const name = String(gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
+  const lose = gl.getExtension('WEBGL_lose_context');
+  if (lose) lose.loseContext();
+  return SOFTWARE_RENDERER.test(name);
+}
 
 function paint(robot, material) {
   robot.traverse((o) => { if (o.isMesh) { o.material = material; o.castShadow = false; } });
@@ -42,8 +58,11 @@ export class RobotViewer {
     this.paused = false;
     this.latest = null;   // the joints that came while paused
     this.pause(false);
-    this.renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
-    this.renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
+    const software = drawnInSoftware();
+    this.picture.dataset.renderer = software ? 'software' : 'gpu';
+    this.renderer = new THREE.WebGLRenderer({ antialias: !software, preserveDrawingBuffer: true });
+    this.renderer.setPixelRatio(software ? 1 : Math.min(window.devicePixelRatio, 2));
+    const frameMs = software ? SOFTWARE_FRAME_MS : FRAME_MS;
     this.picture.prepend(this.renderer.domElement);
     this.scene = new THREE.Scene();
     this.scene.background = new THREE.Color(0xe9eef2);
@@ -76,7 +95,7 @@ export class RobotViewer {
     // Draw only what changed, and at most FRAME_MS apart: without a GPU every frame costs a core.
     let drawn = 0;
     const loop = (now) => {
-      if (this.dirty && this.picture.isConnected && now - drawn >= FRAME_MS) {
+      if (this.dirty && this.picture.isConnected && now - drawn >= frameMs) {
         this.renderer.render(this.scene, this.camera);
         this.dirty = false;
         drawn = now;
