@@ -4,6 +4,7 @@ service on the in-memory bus with a controller that holds the arm (`arm`)."""
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 import uuid
 from dataclasses import dataclass, field
@@ -78,6 +79,18 @@ def cfg() -> config.ArmConfig:
     return config.load("asibot")
 
 
+#: Missed heartbeat periods before the driver calls a drive silent, in the rigs of tests about
+#: anything else than that: the robot's file says 1.5 (0.15 s), for drives on a CAN bus of their
+#: own. The emulated drives are threads of a test process on a loaded two-core CI machine: their
+#: heartbeats came 0.17-0.26 s apart in two runs, and tests of other things stopped on it.
+#: The tests of heartbeat loss itself use `strict_rig`, with the robot's figure.
+PATIENT_PERIODS = 6.0
+
+
+def patient(cfg: config.ArmConfig) -> config.ArmConfig:
+    return dataclasses.replace(cfg, heartbeat_timeout_periods=PATIENT_PERIODS)
+
+
 def _rig(cfg: config.ArmConfig, **emulator_options) -> Rig:
     channel = f"test-{uuid.uuid4().hex[:8]}"
     sniffer = Sniffer(channel)
@@ -88,7 +101,16 @@ def _rig(cfg: config.ArmConfig, **emulator_options) -> Rig:
 
 @pytest.fixture
 def rig(cfg):
-    """Master + 5 emulated drives (CSP capable); call rig.start_driver() to run the driver."""
+    """Master + 5 emulated drives (CSP capable); call rig.start_driver() to run the driver.
+    A drive is silent after PATIENT_PERIODS missed heartbeats."""
+    r = _rig(patient(cfg))
+    yield r
+    _close(r)
+
+
+@pytest.fixture
+def strict_rig(cfg):
+    """As `rig`, with the robot's own heartbeat timeout: for the tests of heartbeat loss."""
     r = _rig(cfg)
     yield r
     _close(r)
@@ -102,7 +124,7 @@ COLD_ANGLES = {1: 0.0, 2: 0.5, 3: -0.4, 4: 0.3, 5: 0.0}
 @pytest.fixture
 def cold_rig(cfg):
     """As `rig`, just switched on: every drive counts from 0 wherever its joint stands."""
-    r = _rig(cfg, positions=COLD_ANGLES)
+    r = _rig(patient(cfg), positions=COLD_ANGLES)
     for node in cfg.nodes:
         r.emu.power_cycle(node)
     yield r
@@ -112,7 +134,7 @@ def cold_rig(cfg):
 @pytest.fixture
 def pp_rig(cfg):
     """Same, but the drives only know profile position."""
-    r = _rig(cfg, supports_csp=False)
+    r = _rig(patient(cfg), supports_csp=False)
     yield r
     _close(r)
 

@@ -23,8 +23,6 @@ from asibot.arm_driver.cyclic import PeriodicFrames
 from asibot.arm_driver.master import LOOP_STALL_S, CanopenMaster
 from asibot.testing import wait_until
 
-from .conftest import _close, _rig
-
 MASTER_HEARTBEAT = 0x77F
 QUICK_STOP_ACTIVE = "quick stop active"
 
@@ -117,7 +115,8 @@ def test_a_drive_quick_stops_by_itself_when_the_master_dies(rig):
     assert all(d.connection_losses == 1 for d in rig.emu.drives.values())
 
 
-def test_a_drive_whose_cable_is_pulled_quick_stops_by_itself_and_is_reset_afterwards(rig):
+def test_a_drive_whose_cable_is_pulled_quick_stops_by_itself_and_is_reset_afterwards(strict_rig):
+    rig = strict_rig
     d = up(rig)
     rig.emu.silent(3)            # it hears nothing: the master's quick stop cannot reach it either
     wait_until(lambda: rig.emu.states()[3] == QUICK_STOP_ACTIVE, 3,
@@ -134,22 +133,10 @@ def test_a_drive_whose_cable_is_pulled_quick_stops_by_itself_and_is_reset_afterw
     assert set(rig.emu.states().values()) == {"operation enabled"}
 
 
-@pytest.fixture
-def patient_rig(cfg):
-    """As `rig`, with a drive silent only after 0.6 s (the robot's file says 0.15 s). CI, once: on
-    a loaded machine the emulated drives' heartbeats came 0.17 s apart while the driver came up,
-    and it stopped them for that, before the loop this test hangs had stalled; the fault it
-    reported was that one, not the stall's."""
-    r = _rig(dataclasses.replace(cfg, heartbeat_timeout_periods=6.0))
-    yield r
-    _close(r)
-
-
-def test_a_hung_control_loop_stops_the_drives_and_faults_when_it_comes_back(patient_rig):
+def test_a_hung_control_loop_stops_the_drives_and_faults_when_it_comes_back(rig):
     """The periodic sender keeps SYNC, the heartbeat and the last set-points going whatever the
     control loop does; a loop that hangs (deaf to the estop) must not leave the drives enabled:
     the guard stops the heartbeat and each drive quick-stops by itself."""
-    rig = patient_rig
     d = up(rig)
     gate, tick = threading.Event(), d._tick
 
