@@ -26,7 +26,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
 
-from bench_web import CHROMIUM_ARGS, ROBOT, _answers  # noqa: E402
+from bench_web import CHROMIUM_ARGS, ROBOT, answers  # noqa: E402
 from table import QUICK_HELP, print_table  # noqa: E402
 
 from asibot.client import CartesianClient  # noqa: E402
@@ -137,7 +137,7 @@ def main() -> None:
         os.environ["ASIBOT_ROUTER"] = stack.endpoint   # for this process's client
         try:
             client = CartesianClient(timeout=5.0)
-            wait_until(lambda: _answers(client), timeout=120, interval=0.2)
+            wait_until(lambda: answers(client), timeout=120, interval=0.2)
             stack.wait_alive("web/main", timeout=60)
 
             def measure(page_name: str) -> None:

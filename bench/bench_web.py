@@ -78,7 +78,7 @@ def main() -> None:
         try:
             # --- start-up ----------------------------------------------------------------------
             client = CartesianClient(timeout=1.0)
-            wait_until(lambda: _answers(client), timeout=120, interval=0.1)
+            wait_until(lambda: answers(client), timeout=120, interval=0.1)
             t_kinematics = time.monotonic() - t0
             wait_until(lambda: served(stack.web_url), timeout=60, interval=0.05)
             page = browser.new_page(viewport={"width": 1366, "height": 900})
@@ -304,7 +304,7 @@ def switch_rows(page, n: int) -> list[tuple]:
             ("switch tap to the ring on the next element p99", "ms", pct(lag, 99), "frame time p99", pct(frames, 99), "")]
 
 
-def _answers(client: CartesianClient) -> bool:
+def answers(client: CartesianClient) -> bool:
     try:
         if client.robot is None:
             client.open(ROBOT)

@@ -180,7 +180,7 @@ def test_the_image_runs_the_sim_profile_with_compose(image: dict[str, str], engi
            "COMPOSE_PROJECT_NAME": PROJECT}
     # Compose v2, the Docker CLI's plugin, as a user types it (docs/docker.md).
     up = ["docker", "compose", "-f", str(tmp_path / "compose.yaml"), "--profile", "sim"]
-    assert run([*up[:2], "version", "--short"], env, 60).stdout.startswith("2."), \
+    assert run(["docker", "compose", "version", "--short"], env, 60).stdout.startswith("2."), \
         "the image test needs Compose v2: ./bootstrap installs it"
     host = {**os.environ, "ASIBOT_ROUTER": f"tcp/127.0.0.1:{ports['router']}"}
     try:

@@ -17,24 +17,27 @@ const CAMERAS_MS = 5000;
 const POINTS = new THREE.PointsMaterial({ size: 0.03, vertexColors: true });
 const CLOUD_SHOWN = 'asibot.cloud';
 // Frames at least this far apart (25 a second), ms; a joint that moved less than SEEN_DEG is not redrawn.
+const FRAME_MS = 40;
+const SEEN_DEG = 0.05;
 // Drawn in software (no graphics card: SwiftShader, llvmpipe), a frame costs the CPU that the
 // robot's own services need: 10 a second, without antialiasing, at one pixel a pixel.
-const FRAME_MS = 40;
 const SOFTWARE_FRAME_MS = 100;
 const SOFTWARE_RENDERER = /swiftshader|llvmpipe|softpipe|software|basic render/i;
-const SEEN_DEG = 0.05;
 const GHOST = new THREE.MeshStandardMaterial({ color: 0xff9f1a, transparent: true, opacity: 0.35, depthWrite: false });
 
-// Whether this browser draws WebGL without a graphics card, asked of a throwaway context (the
-// answer decides how the real one is made: antialiasing cannot be turned off later).
+// Whether this browser draws WebGL without a graphics card, asked once of a throwaway context
+// (the answer decides how each view's context is made: antialiasing cannot be turned off later).
+let software = null;
 function drawnInSoftware() {
-  const gl = document.createElement('canvas').getContext('webgl2') || document.createElement('canvas').getContext('webgl');
-  if (!gl) return false;
+  if (software !== null) return software;
+  const canvas = document.createElement('canvas');
+  const gl = canvas.getContext('webgl2') || canvas.getContext('webgl');
+  if (!gl) return (software = false);
   const info = gl.getExtension('WEBGL_debug_renderer_info');
   const name = String(gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
   const lose = gl.getExtension('WEBGL_lose_context');
   if (lose) lose.loseContext();
-  return SOFTWARE_RENDERER.test(name);
+  return (software = SOFTWARE_RENDERER.test(name));
 }
 
 function paint(robot, material) {
@@ -58,11 +61,11 @@ export class RobotViewer {
     this.paused = false;
     this.latest = null;   // the joints that came while paused
     this.pause(false);
-    const software = drawnInSoftware();
-    this.picture.dataset.renderer = software ? 'software' : 'gpu';
-    this.renderer = new THREE.WebGLRenderer({ antialias: !software, preserveDrawingBuffer: true });
-    this.renderer.setPixelRatio(software ? 1 : Math.min(window.devicePixelRatio, 2));
-    const frameMs = software ? SOFTWARE_FRAME_MS : FRAME_MS;
+    const inSoftware = drawnInSoftware();
+    this.picture.dataset.renderer = inSoftware ? 'software' : 'gpu';
+    this.renderer = new THREE.WebGLRenderer({ antialias: !inSoftware, preserveDrawingBuffer: true });
+    this.renderer.setPixelRatio(inSoftware ? 1 : Math.min(window.devicePixelRatio, 2));
+    const frameMs = inSoftware ? SOFTWARE_FRAME_MS : FRAME_MS;
     this.picture.prepend(this.renderer.domElement);
     this.scene = new THREE.Scene();
     this.scene.background = new THREE.Color(0xe9eef2);
