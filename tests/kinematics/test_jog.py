@@ -36,10 +36,19 @@ def stopped(client) -> list[float]:
     return client.state()["joints"]
 
 
+def settles_at(client, joints: list[float], atol: float = 0.2, timeout: float = 5.0) -> None:
+    """The measured joints reach `joints` (deg, within `atol`) after the motion is done: the ideal
+    driver moves at most its top speed a 10 ms tick, and on a loaded machine, where its ticks
+    come late, it reaches the end of the path after the controller has sent it."""
+    wait_until(lambda: np.allclose(client.state()["joints"][:len(joints)], joints, atol=atol), timeout,
+               message=lambda: f"the arm stopped at {client.state()['joints']}, not {joints}")
+
+
 def bent(client) -> list[float]:
     """Put the arm at BENT; the point there."""
     client.movj(joints=BENT, duration=0.5)
     assert client.wait(timeout=5)
+    settles_at(client, BENT, atol=1e-6)      # a step starts from the end of the movj
     return client.stat()
 
 
@@ -54,7 +63,7 @@ def test_joint_steps_touched_while_moving_add_up_from_the_previous_target(client
     # From the first step's target, not from where the arm was: it does not stop short.
     assert second["joints"] == pytest.approx([20, 5, 5, 5, 0], abs=1e-9)
     assert client.wait(timeout=30)
-    assert client.state()["joints"] == pytest.approx([20, 5, 5, 5, 0], abs=0.2)
+    settles_at(client, [20, 5, 5, 5, 0])
 
 
 def test_cartesian_steps_touched_while_moving_add_up_in_a_straight_line(client):
@@ -111,7 +120,7 @@ def test_after_another_verbs_motion_a_step_starts_where_the_arm_is(client, serve
     step = jog(client, "q1", 5.0, 5)
     assert step["joints"][0] > 25.0          # from where the movj had taken it, not from 10
     assert client.wait(timeout=10)
-    assert client.state()["joints"][0] == pytest.approx(step["joints"][0], abs=0.2)
+    settles_at(client, step["joints"][:1])
 
 
 @pytest.mark.parametrize("axis,step,code,words", [
