@@ -59,7 +59,8 @@ def pytest_collection_modifyitems(config, items):
     """Slow tests are also marked `robot` when a robot, simulated or emulated, runs on the wall
     clock, so that a late heartbeat or a lost odometry tick fails them as it would fail a real
     robot: all but the page's (tests/web), and of those the ones with the Pioneer navigating
-    (the `apartment` stack). The page's other tests move the arm too, but wait for what they see."""
+    (the `apartment` stack). The page's other tests move the arm too, but wait for what they see.
+    A quick test whose timing is its point carries the mark itself (tests/arm_driver/test_drive_bus.py)."""
     for item in items:
         if item.get_closest_marker("slow") and (Path(item.path).parent.name != "web"
                                                  or "apartment" in item.fixturenames):
