@@ -2,14 +2,13 @@
 service unit tests get an in-memory bus. `pytest --cpu-burners 2` runs the suite with both
 cores of a 2-core machine kept busy, as a loaded CI machine would be.
 
-How `tests/run` (CI) shares two cores: every test but those marked `robot` (added below: a
-robot moving on the wall clock) on two workers (pytest-xdist, a module to a worker, so that its
-stack and browser start once), the page's browser tests among them; then the `robot` tests in
-one process, one after the other. Run beside the others, a navigating robot lost its odometry
-for half a second, which no robot would: at the same CPU weight (a CPU cgroup each, or plain
-`nice`, which Linux's autogroup confines to a session while every service starts its own), and
-at a tenth of it the others' own robots did (the emulated drives of a bench, an arm streamed
-through an emergency stop)."""
+With `-n 2` (pytest-xdist: the day-to-day loop, `pytest -m "not slow" -n 2`) every test of a
+module with a real-time test (marked `slow`: a simulated robot moving, a browser) runs on one
+worker, one after the other, the image test on its own, and the unit tests spread over both.
+`tests/run` (CI) runs the tests not marked `slow` so, then the `slow` ones in one process: a
+real-time test beside the image's build, or beside other tests, lost its odometry for half a
+second (two cores, vfs copies), which no robot would; two browser stacks at once took longer
+than one after the other (both cores were already busy)."""
 
 import collections
 import fcntl
@@ -54,17 +53,14 @@ def user_data(tmp_path_factory):
         os.environ["ASIBOT_DATA"] = old
 
 
-@pytest.hookimpl(tryfirst=True)     # before `-m` selects by it
 def pytest_collection_modifyitems(config, items):
-    """Slow tests are also marked `robot` when a robot, simulated or emulated, runs on the wall
-    clock, so that a late heartbeat or a lost odometry tick fails them as it would fail a real
-    robot: all but the page's (tests/web), and of those the ones with the Pioneer navigating
-    (the `apartment` stack). The page's other tests move the arm too, but wait for what they see.
-    A quick test whose timing is its point carries the mark itself (tests/arm_driver/test_drive_bus.py)."""
+    """The xdist groups (see the module's docstring): by module, so a module's fixtures start once."""
+    realtime = {item.module.__name__ for item in items if item.get_closest_marker("slow")}
     for item in items:
-        if item.get_closest_marker("slow") and (Path(item.path).parent.name != "web"
-                                                 or "apartment" in item.fixturenames):
-            item.add_marker(pytest.mark.robot)
+        if item.get_closest_marker("docker"):
+            item.add_marker(pytest.mark.xdist_group("docker"))
+        elif item.module.__name__ in realtime:
+            item.add_marker(pytest.mark.xdist_group("realtime"))
 
 
 @pytest.fixture(scope="session")

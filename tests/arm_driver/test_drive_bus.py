@@ -23,10 +23,6 @@ from asibot.arm_driver.cyclic import PeriodicFrames
 from asibot.arm_driver.master import LOOP_STALL_S, CanopenMaster
 from asibot.testing import wait_until
 
-# The bus's timing is the point (a SYNC every 10 ms, heartbeats a drive counts on): `tests/run`
-# runs these with the robots', one at a time (a SYNC came 0.22 s late beside the page's tests).
-pytestmark = pytest.mark.robot
-
 MASTER_HEARTBEAT = 0x77F
 QUICK_STOP_ACTIVE = "quick stop active"
 
