@@ -40,7 +40,7 @@ def settles_at(client, joints: list[float], atol: float = 0.2, timeout: float = 
     """The measured joints reach `joints` (deg, within `atol`) after the motion is done: the ideal
     driver moves at most its top speed a 10 ms tick, and on a loaded machine, where its ticks
     come late, it reaches the end of the path after the controller has sent it."""
-    wait_until(lambda: np.allclose(client.state()["joints"][:len(joints)], joints, atol=atol), timeout,
+    wait_until(lambda: np.allclose(client.state()["joints"][:len(joints)], joints, rtol=0, atol=atol), timeout,
                message=lambda: f"the arm stopped at {client.state()['joints']}, not {joints}")
 
 
