@@ -2,13 +2,12 @@
 service unit tests get an in-memory bus. `pytest --cpu-burners 2` runs the suite with both
 cores of a 2-core machine kept busy, as a loaded CI machine would be.
 
-With `-n 2` (pytest-xdist: the day-to-day loop, `pytest -m "not slow" -n 2`) every test of a
-module with a real-time test (marked `slow`: a simulated robot moving, a browser) runs on one
-worker, one after the other, the image test on its own, and the unit tests spread over both.
-`tests/run` (CI) runs the tests not marked `slow` so, then the `slow` ones in one process: a
-real-time test beside the image's build, or beside other tests, lost its odometry for half a
-second (two cores, vfs copies), which no robot would; two browser stacks at once took longer
-than one after the other (both cores were already busy)."""
+With `-n 2` (pytest-xdist) each test file runs whole on one worker (`--dist loadfile`, in
+pyproject.toml), so a module's fixtures (a stack, a browser) start once. `tests/run` (CI) runs
+the tests not marked `slow` and the browser tests (marked `browser` here) so, then the other
+`slow` ones (a simulated robot moving in real time, the image) in one process: a navigating
+robot beside other tests lost its odometry for half a second, which no robot would. A browser
+test whose input the load itself would spoil takes `quiet` (or `burners_paused`)."""
 
 import collections
 import fcntl
@@ -54,13 +53,10 @@ def user_data(tmp_path_factory):
 
 
 def pytest_collection_modifyitems(config, items):
-    """The xdist groups (see the module's docstring): by module, so a module's fixtures start once."""
-    realtime = {item.module.__name__ for item in items if item.get_closest_marker("slow")}
+    """`browser`: every test with a real browser (the `browser` fixture, however deep)."""
     for item in items:
-        if item.get_closest_marker("docker"):
-            item.add_marker(pytest.mark.xdist_group("docker"))
-        elif item.module.__name__ in realtime:
-            item.add_marker(pytest.mark.xdist_group("realtime"))
+        if "browser" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.browser)
 
 
 @pytest.fixture(scope="session")
