@@ -4,10 +4,11 @@ cores of a 2-core machine kept busy, as a loaded CI machine would be.
 
 With `-n 2` (pytest-xdist) each test file runs whole on one worker (`--dist loadfile`, in
 pyproject.toml), so a module's fixtures (a stack, a browser) start once. `tests/run` (CI) runs
-the tests not marked `slow` and the browser tests (marked `browser` here) so, then the other
-`slow` ones (a simulated robot moving in real time, the image) in one process: a navigating
-robot beside other tests lost its odometry for half a second, which no robot would. A browser
-test whose input the load itself would spoil takes `quiet` (or `burners_paused`)."""
+the tests so in two passes that keep the robots moving in real time (marked `slow`, no
+browser) apart from the browser tests (marked `browser` here): beside a browser test a
+navigating robot lost its odometry for half a second, which no robot would. The tests marked
+`alone` run last, one at a time. A test whose input the load itself would spoil takes `quiet`
+(or `burners_paused`)."""
 
 import collections
 import fcntl

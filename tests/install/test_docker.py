@@ -33,7 +33,7 @@ STAGES = ("web", "python")      # the Dockerfile's build stages
 MACHINE_CA = Path("/etc/ssl/certs/ca-certificates.crt")
 
 # Building the image is minutes of downloads and vfs copies (docs/docker.md has the figures).
-pytestmark = [pytest.mark.slow, pytest.mark.docker, pytest.mark.timeout(2400)]
+pytestmark = [pytest.mark.slow, pytest.mark.docker, pytest.mark.alone, pytest.mark.timeout(2400)]
 
 
 def run(argv: list[str], env: dict[str, str], timeout: float, **kw) -> subprocess.CompletedProcess:

@@ -20,7 +20,7 @@ from asibot.testing import Inbox, wait_until
 
 from .conftest import CHROMIUM, CHROMIUM_ARGS, _stack, http, screenshot
 
-pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
+pytestmark = [pytest.mark.slow, pytest.mark.alone, pytest.mark.timeout(300)]
 ROBOT = "asibot-sim"
 RED_CAN = Path(__file__).resolve().parents[2] / "libs" / "common" / "asibot" / "examples" / "give_me_the_red_can.py"
 
