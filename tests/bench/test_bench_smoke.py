@@ -21,6 +21,13 @@ from asibot.testing import free_port
 
 ROOT = Path(__file__).resolve().parents[2]
 BENCHES = sorted(p.name for p in (ROOT / "bench").glob("bench_*.py"))
+
+
+def browser_marked(name: str):
+    """A bench that drives chromium is a browser test (tests/run runs it with those, not beside
+    the robots moving in real time: tests/conftest.py)."""
+    drives_chromium = "playwright" in (ROOT / "bench" / name).read_text()
+    return pytest.param(name, marks=[pytest.mark.browser] if drives_chromium else [])
 #: s for one smoke run: the slowest (bench_teach) takes 30 s on an idle 2-core machine; a loaded CI is slower.
 TIMEOUT = 400
 #: A Markdown table as bench/table.py prints it: a header row, the rule under it, one row at least.
@@ -63,7 +70,7 @@ def said(out: str, err: str) -> str:
     return f"--- stdout:\n{out[-4000:]}\n--- stderr:\n{err[-6000:]}"
 
 
-@pytest.mark.parametrize("name", BENCHES)
+@pytest.mark.parametrize("name", [browser_marked(name) for name in BENCHES])
 def test_quick_run_prints_its_table(name, tmp_path):
     rc, out, err = run(name, tmp_path / "data")
     assert rc == 0, f"{name} --quick exited with {rc}\n{said(out, err)}"
