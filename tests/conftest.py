@@ -54,10 +54,13 @@ def user_data(tmp_path_factory):
 
 
 def pytest_collection_modifyitems(config, items):
-    """`browser`: every test with a real browser (the `browser` fixture, however deep)."""
+    """`browser`: every test with a real browser (the `browser` fixture, however deep). The
+    image's test last: its engine's clean-up (containers stopping, layers unmounted) must not
+    run under the page's microphone, which it starved once (a word learned cut, in CI)."""
     for item in items:
         if "browser" in getattr(item, "fixturenames", ()):
             item.add_marker(pytest.mark.browser)
+    items.sort(key=lambda item: item.get_closest_marker("docker") is not None)
 
 
 @pytest.fixture(scope="session")
