@@ -7,16 +7,13 @@ pyproject.toml), so a module's fixtures (a stack, a browser) start once. `tests/
 the tests so in two passes that keep the robots moving in real time (marked `slow`, no
 browser) apart from the browser tests (marked `browser` here): beside a browser test a
 navigating robot lost its odometry for half a second, which no robot would. The tests marked
-`alone` run last, one at a time. A test whose input the load itself would spoil takes `quiet`
-(or `burners_paused`)."""
+`alone` (whose input a busy machine would spoil) run last, one at a time."""
 
 import collections
-import fcntl
 import os
 import signal
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
@@ -63,42 +60,6 @@ def pytest_collection_modifyitems(config, items):
     items.sort(key=lambda item: item.get_closest_marker("docker") is not None)
 
 
-@pytest.fixture(scope="session")
-def _quiet_lock(request, tmp_path_factory) -> Path | None:
-    """Under xdist, one file per run shared by its workers (in the run's temporary folder, which
-    pytest clears with it): `quiet` below. Alone, nothing to share."""
-    if not hasattr(request.config, "workerinput"):
-        return None
-    return tmp_path_factory.getbasetemp().parent / "quiet.lock"
-
-
-@pytest.fixture(autouse=True)
-def _share_the_cores(request, _quiet_lock):
-    """Every test holds the run's lock shared, so a `quiet` test can have the cores alone; not the
-    image test, which is minutes of downloads and disk copies a quiet test need not wait for."""
-    if _quiet_lock is None or request.node.get_closest_marker("docker"):
-        yield None
-        return
-    with open(_quiet_lock, "a") as f:
-        fcntl.flock(f, fcntl.LOCK_SH)
-        yield f
-
-
-@pytest.fixture
-def quiet(_share_the_cores):
-    """The other worker waits (between its tests) while this test runs: for a test whose input
-    the load itself would spoil (see burners_paused)."""
-    if _share_the_cores is None:        # one process: nothing else runs meanwhile
-        yield
-        return
-    # Our shared hold becomes the whole lock once the other worker's test in flight has ended.
-    fcntl.flock(_share_the_cores, fcntl.LOCK_EX)
-    try:
-        yield
-    finally:
-        fcntl.flock(_share_the_cores, fcntl.LOCK_SH)
-
-
 _file_seconds: collections.Counter[str] = collections.Counter()
 
 
@@ -135,7 +96,7 @@ def cpu_burners(request):
 
 
 @pytest.fixture
-def burners_paused(cpu_burners, quiet):
+def burners_paused(cpu_burners):
     """The burners stopped for one test whose input the load itself would spoil, not our code.
 
     Chromium's fake microphone plays its file from an ordinary thread: with both cores busy it
@@ -143,6 +104,7 @@ def burners_paused(cpu_burners, quiet):
     runs: "L AO R OW G" for zorblat, then "only 50% of the speech" at every later saying). A
     real microphone feeds the browser's real-time audio thread (our page captures in an
     AudioWorklet). Learning under load is covered by tests/voice, which feed the audio directly.
+    Such a test is marked `alone` too, so that tests/run gives it the machine.
     """
     for p in cpu_burners:
         p.send_signal(signal.SIGSTOP)

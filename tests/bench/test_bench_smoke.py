@@ -21,6 +21,12 @@ from asibot.testing import free_port
 
 ROOT = Path(__file__).resolve().parents[2]
 BENCHES = sorted(p.name for p in (ROOT / "bench").glob("bench_*.py"))
+#: s for one smoke run: the slowest (bench_teach) takes 30 s on an idle 2-core machine; a loaded CI is slower.
+TIMEOUT = 400
+#: A Markdown table as bench/table.py prints it: a header row, the rule under it, one row at least.
+TABLE = re.compile(r"^\|.*\|\n\|(---\|)+\n\|.*\|$", re.MULTILINE)
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(TIMEOUT + 60)]
 
 
 def browser_marked(name: str):
@@ -28,12 +34,6 @@ def browser_marked(name: str):
     the robots moving in real time: tests/conftest.py)."""
     drives_chromium = "playwright" in (ROOT / "bench" / name).read_text()
     return pytest.param(name, marks=[pytest.mark.browser] if drives_chromium else [])
-#: s for one smoke run: the slowest (bench_teach) takes 30 s on an idle 2-core machine; a loaded CI is slower.
-TIMEOUT = 400
-#: A Markdown table as bench/table.py prints it: a header row, the rule under it, one row at least.
-TABLE = re.compile(r"^\|.*\|\n\|(---\|)+\n\|.*\|$", re.MULTILINE)
-
-pytestmark = [pytest.mark.slow, pytest.mark.timeout(TIMEOUT + 60)]
 
 
 def run(name: str, data: Path) -> tuple[int, str, str]:
