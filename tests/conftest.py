@@ -4,10 +4,11 @@ cores of a 2-core machine kept busy, as a loaded CI machine would be.
 
 With `-n 2` (pytest-xdist) each test file runs whole on one worker (`--dist loadfile`, in
 pyproject.toml), so a module's fixtures (a stack, a browser) start once. `tests/run` (CI) runs
-the tests so in two passes that keep the robots moving in real time (marked `slow`, no
-browser) apart from the browser tests (marked `browser` here): beside a browser test a
-navigating robot lost its odometry for half a second, which no robot would. The tests marked
-`alone` (whose input a busy machine would spoil) run last, one at a time."""
+the tests in three passes that keep the robots moving in real time (marked `slow`, no browser)
+and the unit tests timed against a watchdog (marked `realtime`) apart from the browser tests
+(marked `browser` here): beside a browser test a navigating robot lost its odometry for half a
+second, which no robot would. The tests marked `alone` (whose input a busy machine would spoil)
+run last, one at a time."""
 
 import collections
 import os

@@ -296,8 +296,8 @@ def stays_still(rig, seconds: float) -> None:
 
 
 # A stream timed against the watchdog: a busy machine pauses it by itself (seen beside the
-# browser tests), so it runs with the robots moving in real time (tests/run's second pass).
-@pytest.mark.slow
+# browser tests), so tests/run runs it with the robots moving in real time (its second pass).
+@pytest.mark.realtime
 @pytest.mark.parametrize("recovery", ["estop released", "fault reset", "new controller"])
 def test_a_stream_running_through_a_recovery_moves_nothing_until_it_pauses(rig, recovery):
     """Issue 10, finding 4: a velocity stream that keeps coming through an estop, a fault or a

@@ -56,6 +56,8 @@ def test_only_the_holders_cmd_vel_drives_the_base(base):
         other.close()
 
 
+# A stream timed against the watchdog, as the arm driver's: tests/run runs it with the robots.
+@pytest.mark.realtime
 @pytest.mark.parametrize("interruption", ["cable", "estop"])
 def test_a_stream_through_an_interruption_drives_only_after_it_pauses(base, interruption):
     """The stream goes on while the cable is out (or the estop engaged); when the base is back
