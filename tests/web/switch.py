@@ -8,7 +8,7 @@ data-kind, and counts its moves in data-step."""
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 SETTINGS_FORMAT = {"format": "asibot-access-settings", "version": 1}
@@ -100,6 +100,8 @@ class Presses:
 
     page: Any
     count: int = 0
+    #: what the ring stood on at each press ("tap: Wait"), for a count that came out too high
+    trail: list[str] = field(default_factory=list)
     #: ms between a tap and the next one when two quick taps stop (a person's pace, not a double tap)
     gap_ms: int = 0
     _tapped: bool = False
@@ -114,14 +116,19 @@ class Presses:
         if self._tapped and self.gap_ms:
             self.page.wait_for_timeout(self.gap_ms)
 
+    def _note(self, press: str) -> None:
+        self.trail.append(f"{press}: {' | '.join(ringed(self.page))[:60]}")
+
     def tap(self) -> None:
         self._pace()
+        self._note("tap")
         tap(self.page)
         self.count += 1
         self._tapped = True
 
     def hold(self) -> None:
         self._pace()
+        self._note("hold")
         hold(self.page)
         self.count += 1
         self._tapped = False

@@ -71,11 +71,12 @@ class Learner:
         """Learn from one utterance (16 kHz mono int16, as the VAD cut it); BadAudio or
         GrammarError with a sentence, and nothing kept, when it cannot be learned."""
         phrase = self.phrase(text)
-        phones = self.reader.read(utterance)
-        if len(phones) < MIN_PHONES:
-            raise BadAudio(f"Too little speech was heard to learn {phrase!r} ({len(phones)} sound"
-                           f"{'' if len(phones) == 1 else 's'}); say the whole word again, clearly.")
-        phones = check_phones(phones)
+        readings = self.reader.readings(utterance)
+        most = max(len(r) for r in readings)
+        if most < MIN_PHONES:
+            raise BadAudio(f"Too little speech was heard to learn {phrase!r} ({most} sound"
+                           f"{'' if most == 1 else 's'}); say the whole word again, clearly.")
+        phones = self.best_reading(phrase, [check_phones(r) for r in readings if len(r) >= MIN_PHONES], utterance)
         check = build_grammar([*self.words(), phrase], self.recognizer.lexicon, skip_unknown=True,
                               learned=self.store.all())
         heard = self.recognizer.decode(utterance, check).heard
@@ -83,6 +84,17 @@ class Learner:
         matched = said == phrase if phrase in check.phrases else None
         sayings, dropped = self.store.add(phrase, phones)
         return Learned(phrase, phones, sayings, matched, said, dropped, len(utterance) / RATE)
+
+    def best_reading(self, phrase: str, readings: list[tuple[str, ...]], utterance: np.ndarray) -> tuple[str, ...]:
+        """The reading that, as the phrase's only pronunciation, explains the most of its own
+        saying (then scores best): a reading that lost the word's end explains only part of it,
+        as it would every later saying."""
+        def fit(phones: tuple[str, ...]) -> tuple[bool, float, float]:
+            alone = build_grammar([phrase], self.recognizer.lexicon, skip_unknown=True, learned={phrase: [phones]})
+            d = self.recognizer.decode(utterance, alone)
+            return d.heard is not None, d.explained, d.score
+        distinct = list(dict.fromkeys(readings))
+        return distinct[0] if len(distinct) == 1 else max(distinct, key=fit)
 
     def forget(self, text: object) -> tuple[str, int]:
         """Forget the user's pronunciations of `text`: (its phrase, how many there were)."""

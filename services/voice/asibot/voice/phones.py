@@ -14,16 +14,25 @@ Context-dependent phones are slow with pocketsphinx's default beams (20 s for a 
 busy 2-core machine); beams of 1e-20 (1e-15 for words) gave the same phones on every test
 recording in 1 to 3 s, and narrower ones (1e-10) lost the end of the word.
 
+One reading is not enough: where the saying's 10 ms frames happen to fall decides how much of
+the word the phone loop keeps. "zorblat" read from 16 starting points within one frame gave
+"Z L AO R OW N D L ER" (or S for Z, or without the L) 31 times in 64, and the rest lost the word's
+end ("S L AO R OW N", "S AO R OW G"); a pronunciation learned cut matched later sayings only in
+part ("accounts for only 62% of the speech") and the word was never heard. So `readings` reads
+each saying from three starting points a third of a frame apart, and the learner keeps the one
+that explains the saying best (asibot.voice.learning).
+
 pocketsphinx keeps Python's GIL while it decodes: 2 s of phone search in the service's own
 process would stall every thread of it (the microphone's worker, "stop", the bus). So the
-phone loop runs in a child process of its own, started on the first word learned and kept
-for the next.
+phone loop runs in child processes of its own (one a reading, the three at once), started on
+the first word learned and kept for the next.
 """
 
 from __future__ import annotations
 
 import multiprocessing
 import threading
+import time
 from concurrent.futures import ProcessPoolExecutor, TimeoutError as FutureTimeout
 from typing import Iterable, Protocol
 
@@ -42,13 +51,16 @@ MAX_PHONES = 60
 _PAD = 0.2      # s of quiet around the clip: the phone loop, like the grammar, starts and ends in silence
 READ_TIMEOUT = 60.0
 """s a reading may take at most (a 5 s phrase on a busy machine takes about 10)."""
+SHIFTS = (0, FRAME // 3, 2 * FRAME // 3)
+"""Samples each saying is also read from (see the top): a third of a frame apart."""
 
 
 class PhoneReader:
-    """pocketsphinx's phone loop: `read(pcm16k)` -> the phones heard, in order. Thread-safe.
+    """pocketsphinx's phone loop: `readings(pcm16k)` -> the phones heard, in order, from each
+    starting point. Thread-safe.
 
-    The child process and its model start on the first `read` (about 1 s), so a service that
-    never learns a word never pays for them; `close` ends the child.
+    The child processes and their model start on the first reading (about 1 s), so a service
+    that never learns a word never pays for them; `close` ends them.
     """
 
     def __init__(self, lw: float = 4.0, context_dependent: bool = True) -> None:
@@ -56,21 +68,26 @@ class PhoneReader:
         self._lock = threading.Lock()
         self._pool: ProcessPoolExecutor | None = None
 
-    def read(self, pcm16k: np.ndarray) -> tuple[str, ...]:
-        """The phones of one utterance (16 kHz mono int16), silences and noises left out."""
+    def readings(self, pcm16k: np.ndarray) -> list[tuple[str, ...]]:
+        """The phones of one utterance (16 kHz mono int16), silences and noises left out, read from
+        each of SHIFTS (see the top), in that order."""
         if not isinstance(pcm16k, np.ndarray) or pcm16k.dtype != np.int16 or pcm16k.ndim != 1:
             raise BadAudio("The phone reader takes 16 kHz mono int16 samples as a 1-D numpy array; convert the "
                            "audio with asibot.voice.audio first.")
         if len(pcm16k) < FRAME:
             raise BadAudio(f"The audio is {len(pcm16k)} samples long; a word needs at least 10 ms.")
-        with self._lock:                 # one reading at a time: the child has one decoder
+        with self._lock:                 # one saying at a time: each child has one decoder
             if self._pool is None:
                 # spawn, not fork: the service has threads, and a forked copy of their locks could hang
-                self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
-            future = self._pool.submit(_read, pcm16k.tobytes(), self.lw, self.context_dependent)
+                self._pool = ProcessPoolExecutor(len(SHIFTS), mp_context=multiprocessing.get_context("spawn"))
+            futures = [self._pool.submit(_read, pcm16k[shift:].tobytes(), self.lw, self.context_dependent)
+                       for shift in SHIFTS]
+            deadline = time.monotonic() + READ_TIMEOUT
             try:
-                return future.result(READ_TIMEOUT)
+                return [f.result(max(0.0, deadline - time.monotonic())) for f in futures]
             except FutureTimeout:
+                for f in futures:
+                    f.cancel()
                 raise RuntimeError(f"Reading the phones took more than {READ_TIMEOUT:g} s; the machine is too "
                                    "busy, try again.") from None
 
