@@ -116,19 +116,20 @@ class Presses:
         if self._tapped and self.gap_ms:
             self.page.wait_for_timeout(self.gap_ms)
 
-    def _note(self, press: str) -> None:
-        self.trail.append(f"{press}: {' | '.join(ringed(self.page))[:60]}")
+    def _note(self, press: str, on: list[str] | None) -> None:
+        """`on`: what the ring stands on, when the caller has just read it (one read a press)."""
+        self.trail.append(f"{press}: {' | '.join(ringed(self.page) if on is None else on)[:60]}")
 
-    def tap(self) -> None:
+    def tap(self, on: list[str] | None = None) -> None:
         self._pace()
-        self._note("tap")
+        self._note("tap", on)
         tap(self.page)
         self.count += 1
         self._tapped = True
 
-    def hold(self) -> None:
+    def hold(self, on: list[str] | None = None) -> None:
         self._pace()
-        self._note("hold")
+        self._note("hold", on)
         hold(self.page)
         self.count += 1
         self._tapped = False
@@ -148,11 +149,11 @@ class Presses:
         for _ in range(limit):
             now = ringed(self.page)
             if (name in now or ring_label(self.page) == name) and ring_kind(self.page) != "back":
-                self.hold()
+                self.hold(now)
                 if len(now) == 1:
                     return
             else:
-                self.tap()
+                self.tap(now)
         raise AssertionError(f"{name!r} not reached in {limit} presses; the ring is on {ringed(self.page)}")
 
     def until(self, wanted, limit: int = 80) -> list[str]:
@@ -161,7 +162,7 @@ class Presses:
             now = ringed(self.page)
             if wanted(now) and ring_kind(self.page) != "back":
                 return now
-            self.tap()
+            self.tap(now)
         raise AssertionError(f"the ring never got there; it is on {ringed(self.page)}")
 
 
