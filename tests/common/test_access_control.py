@@ -4,7 +4,9 @@ publishes only its own keys.
 
 A refused put is silent on the sender's side, so "never delivered" is shown by order: after
 the refused message, a permitted one goes the same way and is waited for; once it arrived,
-the refused one (sent earlier, on the same router, to the same subscriber) never will.
+the refused one (sent earlier, on the same router, to the same subscriber) never will. That
+holds only once the router knows the subscriber: a put before then is dropped whoever sent it,
+so each test first hears a probe from every sender (`_heard`) before it sends anything refused.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import stat
 import subprocess
 import sys
 import threading
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -63,6 +66,13 @@ def secured(tmp_path, monkeypatch):
 
 def _open(name: str, endpoint: str) -> Bus:
     return Bus(name, endpoint, wait=10.0)
+
+
+def _heard(send: Callable[[], object], arrived: Callable[[], object], who: str) -> None:
+    """Send a permitted probe until it arrives: the router then routes this sender's puts to
+    the subscriber, so a later refused put is dropped by access control, not by timing."""
+    wait_until(lambda: send() or arrived(), timeout=10.0, interval=0.1,
+               message=f"{who}'s probe never reached the subscriber")
 
 
 def test_credentials_are_private_and_made_once(tmp_path):
@@ -136,6 +146,9 @@ def test_the_anonymous_reader_reads_state_and_moves_nothing(secured):
         wait_until(lambda: state.put(ArmState(names=["q1"], positions=[0.1], velocities=[0.0],
                                               mode="idle")) or seen_by_anonymous.where(keys.arm_state(ROBOT)),
                    timeout=10.0, interval=0.1, message="the anonymous session never received arm/state")
+        probe = ArmCommand(mode="velocity", values=[0.0], controller="probe")
+        _heard(lambda: controller.put_raw(keys.arm_command(ROBOT), messages.encode(probe)),
+               lambda: seen_by_driver.where(keys.arm_command(ROBOT), controller="probe"), "the controller")
 
         # Moves nothing: commands, cmd_vel, estop, a controller's token, an RPC.
         anonymous.put_raw(keys.arm_command(ROBOT), messages.encode(
@@ -180,6 +193,13 @@ def test_each_role_publishes_only_its_own_keys(secured):
         seen = Inbox()
         watcher.subscribe_raw(f"{keys.robot(ROBOT)}/**", seen)
         odom, cmd_vel = keys.base_odom(ROBOT), keys.base_cmd_vel(ROBOT)
+        _heard(lambda: driver.put_raw(odom, messages.encode(
+                   messages.Odometry(x=0.0, y=0.0, theta=0.0, vx=0.0, wz=0.0))),
+               lambda: seen.where(odom, x=0.0), "the driver")
+        _heard(lambda: controller.put_raw(cmd_vel, messages.encode(Twist(vx=0.0, wz=0.0))),
+               lambda: seen.where(cmd_vel, vx=0.0), "the controller")
+        _heard(lambda: operator.put_raw(keys.estop(ROBOT), messages.encode(EStop(engaged=True, reason="probe"))),
+               lambda: seen.where(keys.estop(ROBOT), reason="probe"), "the operator")
         # Refused: a controller or an operator faking state, a driver commanding, a controller's estop.
         controller.put_raw(odom, messages.encode(messages.Odometry(x=7.0, y=0.0, theta=0.0, vx=0.0, wz=0.0)))
         operator.put_raw(odom, messages.encode(messages.Odometry(x=8.0, y=0.0, theta=0.0, vx=0.0, wz=0.0)))
@@ -193,9 +213,9 @@ def test_each_role_publishes_only_its_own_keys(secured):
         wait_until(lambda: seen.where(odom, x=1.0) and seen.where(cmd_vel, vx=1.0)
                    and seen.where(keys.estop(ROBOT), reason="operator"),
                    timeout=10.0, message="a permitted state, command or estop did not arrive")
-        assert sorted(m["x"] for m in seen.where(odom)) == [1.0]
-        assert sorted(m["vx"] for m in seen.where(cmd_vel)) == [1.0]
-        assert [m["reason"] for m in seen.where(keys.estop(ROBOT))] == ["operator"]
+        assert {m["x"] for m in seen.where(odom)} == {0.0, 1.0}
+        assert {m["vx"] for m in seen.where(cmd_vel)} == {0.0, 1.0}
+        assert {m["reason"] for m in seen.where(keys.estop(ROBOT))} == {"probe", "operator"}
 
 
 def test_an_open_router_is_unchanged(router, monkeypatch):
