@@ -14,6 +14,12 @@ quiet that ends it is published and stops when the launch request (or the latche
 "stop") arrives. Beside it: recognising the same utterances alone, and the VAD's hangover
 (the quiet a speaker must leave before an utterance ends, which comes on top).
 
+The learning rows teach made-up words (not in the dictionary) from one saying each, as the page's
+"Record a word" does (`Learner.learn_recording`: three phone-loop readings in child processes,
+the best one kept), then ask whether the word is heard in its other sayings (other voices and
+speeds) and whether speech that is not it is still refused. Beside them: one reading in this
+process (the phone loop alone), the choice between the readings, and the saying's duration.
+
 Run: `.venv/bin/python bench/bench_voice.py [--quick]`
 """
 
@@ -36,7 +42,10 @@ from asibot.bus import Bus
 from asibot.messages import AudioChunk, EStop
 from asibot.voice import service
 from asibot.voice.audio import AudioFormat, Converter, decode, read_wav
+from asibot.voice import phones
 from asibot.voice.grammar import Lexicon, build_grammar
+from asibot.voice.learning import Learner, speech_in
+from asibot.voice.pronunciations import Pronunciations
 from asibot.voice.recognizer import Listener, Recognizer
 from asibot.voice.speaker import Speaker
 from asibot.voice.vad import Vad, VadConfig
@@ -51,7 +60,12 @@ OUT_OF_GRAMMAR = ["what is the weather like today", "turn on the television plea
                   "I am hungry", "close the door", "red", "can you hear me"]
 VOICES = ["en-us", "en-us+m1", "en-us+f3", "en-us+m3", "en"]
 SPEEDS = [120, 150, 180]
+#: Words espeak-ng says and CMUdict lacks, so only learning can make them heard.
+MADE_UP = ["zorblat", "quentifar", "mibbledoo"]
+#: The saying each word is learned from; every other saying of VOICES x SPEEDS is a new one.
+TEACHERS = [("en-us", 150), ("en-us+f3", 120), ("en", 180)]
 ROWS: list[tuple[str, str, str, str, str]] = []
+LEARNING_MISSES: list[str] = []
 QUICK = False
 
 
@@ -71,12 +85,13 @@ def speak(folder: Path, text: str, voice: str, speed: int) -> np.ndarray:
 
 
 def main() -> None:
-    global QUICK, VOICES, SPEEDS, OUT_OF_GRAMMAR
+    global QUICK, VOICES, SPEEDS, OUT_OF_GRAMMAR, MADE_UP, TEACHERS
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help=QUICK_HELP)
     QUICK = ap.parse_args().quick
     if QUICK:
         VOICES, SPEEDS, OUT_OF_GRAMMAR = VOICES[:1], SPEEDS[1:2], OUT_OF_GRAMMAR[:2]
+        MADE_UP, TEACHERS = MADE_UP[:1], TEACHERS[:1]
     if shutil.which("espeak-ng") is None:
         raise SystemExit("bench_voice needs espeak-ng: sudo apt-get install espeak-ng")
     folder = Path(tempfile.mkdtemp())
@@ -150,6 +165,7 @@ def main() -> None:
     recognizer.set_grammar(build_grammar(ASSIGNED, lex))
 
     service_rows([(text, x) for text, inside, _, _, x in corpus if inside and text not in ("yes", "no")])
+    learning_rows([(text, x) for text, inside, *_, x in corpus if not inside][:len(OUT_OF_GRAMMAR)])
 
     speaker = Speaker()
     row("speaker: synthesize 'Sorry, I did not understand.'",
@@ -164,6 +180,10 @@ def main() -> None:
     print_table(ROWS, header=("what", "p50", "p99", "unit", "reference / budget"))
     print()
     print_rates(verdicts)
+    print(f"\nlearned words, after {len(TEACHERS)} sayings: not heard, or heard in other speech "
+          f"({len(LEARNING_MISSES)}):")
+    for miss in LEARNING_MISSES:
+        print("  ", miss)
 
 
 def service_rows(clips: list[tuple[str, np.ndarray]]) -> None:
@@ -173,7 +193,8 @@ def service_rows(clips: list[tuple[str, np.ndarray]]) -> None:
     estopped: list[float] = []
     bus.serve(keys.tasks_rpc("list"), lambda req: {"tasks": [{"name": w, "program": "p.py", "words": [w]}
                                                              for w in ASSIGNED]})
-    bus.serve(keys.tasks_rpc("launch"), lambda req: launched.append(time.perf_counter()) or {})
+    bus.serve(keys.tasks_rpc("launch"), lambda req: launched.append(time.perf_counter()) or
+              {"task": req["task"], "program": "p.py", "robot": req["robot"]})
     bus.serve(keys.tasks_rpc("stop"), lambda req: {})
     bus.announce(keys.driver_alive("asibot-sim"))
     bus.subscribe(keys.estop("asibot-sim"), EStop, lambda m: estopped.append(time.perf_counter()))
@@ -227,6 +248,69 @@ def service_rows(clips: list[tuple[str, np.ndarray]]) -> None:
     row("  reference: recognising the same utterances alone", np.array(alone))
     ROWS.append(("  reference: the quiet that ends an utterance (VAD hangover)", f"{VadConfig().hangover * 1e3:.0f}",
                  f"{VadConfig().hangover * 1e3:.0f}", "ms", f"{missed} utterances not recognised (no launch)"))
+
+
+def learning_rows(others: list[tuple[str, np.ndarray]]) -> None:
+    """Each made-up word learned from one teacher's saying, then from each of the others (the
+    page keeps up to three sayings); after the first and after the last, it is listened for in
+    every saying of it that taught nothing, and in `others` (speech that is not it)."""
+    folder = Path(tempfile.mkdtemp())
+    hiss = (np.random.default_rng(2).standard_normal(9600) * 30).astype(np.int16)     # 0.6 s of quiet
+    sayings = {(word, voice, speed): speak(folder, word, voice, speed)
+               for word in MADE_UP for voice, speed in {*itertools.product(VOICES, SPEEDS), *TEACHERS}}
+    reader = phones.PhoneReader()
+    learned, one_reading, choosing, durations = [], [], [], []
+    heard = {1: 0, len(TEACHERS): 0}
+    tried, refused, others_tried = 0, 0, 0
+    try:
+        for i, word in enumerate(MADE_UP):
+            recognizer = Recognizer()
+            learner = Learner(recognizer, Pronunciations(folder / f"pronunciations-{i}.json"),
+                              lambda: list(ASSIGNED), reader)
+            new = [(f"{w} ({v} {s})", x) for (w, v, s), x in sayings.items() if w == word and (v, s) not in TEACHERS]
+            tried += len(new)
+            for n, teacher in enumerate(TEACHERS, 1):
+                recording = np.concatenate([hiss, sayings[(word, *teacher)], hiss])
+                if i == 0 and n == 1 and not QUICK:
+                    learner.learn_recording(word, recording)      # starts the readers' processes (not counted)
+                    learner.forget(word)
+                t0 = time.perf_counter()
+                learner.learn_recording(word, recording)
+                learned.append(time.perf_counter() - t0)
+                speech = speech_in(recording)
+                durations.append(len(speech) / 16000)
+                t0 = time.perf_counter()
+                phones._read(speech.tobytes(), reader.lw, reader.context_dependent)
+                one_reading.append(time.perf_counter() - t0)
+                readings = reader.readings(speech)
+                t0 = time.perf_counter()
+                learner.best_reading(word, readings, speech)
+                choosing.append(time.perf_counter() - t0)
+                if n not in heard:
+                    continue
+                recognizer.set_words([*ASSIGNED, word], skip_unknown=True, learned=learner.store.all())
+                for said, x in new:
+                    d = recognizer.decode(x)
+                    heard[n] += d.heard is not None and d.heard.text == word
+                    if n == len(TEACHERS) and (d.heard is None or d.heard.text != word):
+                        LEARNING_MISSES.append(f"{said}: {d.reason or 'heard ' + repr(d.heard.text)}")
+                if n == len(TEACHERS):
+                    for text, x in others:
+                        others_tried += 1
+                        d = recognizer.decode(x)
+                        refused += d.heard is None or d.heard.text != word
+                        if d.heard is not None and d.heard.text == word:
+                            LEARNING_MISSES.append(f"{text!r} (not {word}) heard as {word}")
+    finally:
+        reader.close()
+        shutil.rmtree(folder)
+    again = "; ".join(f"after {n} saying{'s' * (n > 1)}: heard in {h}/{tried} new sayings" for n, h in heard.items())
+    row(f"learn a made-up word from one saying ({len(learned)} learned: {len(MADE_UP)} words x "
+        f"{len(TEACHERS)} sayings)", np.array(learned), "s", again, scale=1)
+    row("  reference: one phone-loop reading, in this process", np.array(one_reading), "s", scale=1)
+    row("  reference: choosing between the readings (best_reading)", np.array(choosing))
+    row("  reference: the saying's duration", np.array(durations), "s",
+        f"other speech refused {refused}/{others_tried} (after the last saying)", scale=1)
 
 
 def _rebuild_times(recognizer: Recognizer, words: list[str], lex: Lexicon) -> np.ndarray:

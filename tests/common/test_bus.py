@@ -101,6 +101,8 @@ def test_latched_value_reaches_late_joiners(bus, router):
     bus.latch(keys.estop("r3"), m.EStop(engaged=True, reason="pressed"))
     with Bus("late") as late:
         got = []
+        # The latched value is asked for once, on subscribing: the latch must be known by then.
+        assert late.wait_for(keys.estop("r3"), 5), "the latch never answered"
         late.subscribe(keys.estop("r3"), m.EStop, got.append, latest=True)
         wait_until(lambda: got, 3)
         assert got[0].engaged and got[0].reason == "pressed"

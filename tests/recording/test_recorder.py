@@ -38,6 +38,8 @@ def publish_pattern(bus: Bus) -> list[tuple[str, bytes, float]]:
     """Two topics with a known rhythm: 25 states every 20 ms, one twist every 100 ms."""
     state = bus.publisher(keys.arm_state("rec"), m.ArmState)
     twist = bus.publisher(keys.base_cmd_vel("rec"), m.Twist)
+    # Each is put once: the router must know the recorder's subscription first, or it drops them.
+    assert state.wait_for_subscribers(10) and twist.wait_for_subscribers(10), "the recorder never subscribed"
     sent = []
     t0 = time.monotonic()
     for i in range(25):
@@ -56,7 +58,6 @@ def publish_pattern(bus: Bus) -> list[tuple[str, bytes, float]]:
 def test_record_then_replay_reproduces_topics_payloads_and_timing(router, tmp_path, capsys):
     rec = start_recorder(tmp_path)
     with Bus("pub") as bus:
-        time.sleep(0.5)  # let the recorder's subscription reach the router
         sent = publish_pattern(bus)
         time.sleep(0.3)
     rec.send_signal(signal.SIGTERM)
@@ -76,12 +77,16 @@ def test_record_then_replay_reproduces_topics_payloads_and_timing(router, tmp_pa
     with Bus("sub") as sub_bus, Bus("player") as player:
         got = []
         sub_bus.subscribe_raw("rb/rec/**", lambda k, p, t: got.append((k, p, time.monotonic())))
-        time.sleep(0.3)
+        # The replay puts each message once: a probe first shows the router routes the player's
+        # puts to the new subscriber (before that, they are dropped).
+        probe = "rb/rec/probe"
+        wait_until(lambda: player.put_raw(probe, b"") or any(k == probe for k, *_ in got), 10, interval=0.05,
+                   message="the player's puts never reached the subscriber")
         put_at: list[float] = []
         delay = scheduling_delay()  # how late this machine wakes a sleeper right now
         assert replay(path, lambda k, p: put_at.append(time.monotonic()) or player.put_raw(k, p), speed=1.0) == 30
-        wait_until(lambda: len(got) == 30, 3)
-    assert [(k, p) for k, p, _ in got] == [(k, p) for k, p, _ in sent]
+        wait_until(lambda: len([g for g in got if g[0] != probe]) == 30, 3)
+    assert [(k, p) for k, p, _ in got if k != probe] == [(k, p) for k, p, _ in sent]
     # The replay keeps the recorded timing: each message goes out when it is due, late by no more
     # than the machine's own scheduling delay (measured above; a loaded CI machine has more).
     t_sent = [t - sent[0][2] for *_, t in sent]
@@ -108,8 +113,8 @@ def test_replay_as_fast_as_possible_and_filters(router, tmp_path):
 def test_killed_recorder_file_is_recovered(router, tmp_path, capsys):
     rec = start_recorder(tmp_path)
     with Bus("pub") as bus:
-        time.sleep(0.5)
         pub = bus.publisher(keys.arm_state("crash"), m.ArmState, block=True)
+        assert pub.wait_for_subscribers(10), "the recorder never subscribed"   # or the first puts are dropped
         for i in range(500):
             pub.put(m.ArmState(names=["q1"], positions=[float(i)], velocities=[0.0]))
         time.sleep(1.6)  # at least one flush period: these 500 are on disk
