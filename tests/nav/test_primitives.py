@@ -103,12 +103,42 @@ def test_continuous_motion_ends_at_the_longest_time(room):
 def test_stop_and_no_scan(room):
     prim = Primitives()
     prim.start(0.0, "forward", Pose(0.0, 0.0, 0.0), continuous=True)
-    assert prim.active and prim.step(0.0, Pose(0.0, 0.0, 0.0), None).text == "stopped: I cannot see obstacles (no scan)"
-    assert not prim.active
+    waiting = prim.step(0.0, Pose(0.0, 0.0, 0.0), None)          # blind: it stands still and waits
+    assert (waiting.vx, waiting.wz, waiting.active) == (0.0, 0.0, True)
+    assert waiting.text == prim.last_text == "waiting: I cannot see obstacles (no scan)"
+    assert prim.step(1.9, Pose(0.0, 0.0, 0.0), None).active
+    ended = prim.step(2.0, Pose(0.0, 0.0, 0.0), None)             # Settings.blind_timeout
+    assert (ended.vx, ended.wz, ended.active, ended.done) == (0.0, 0.0, False, False)
+    assert ended.text == "stopped: I cannot see obstacles (no scan)" and not prim.active
     prim.start(0.0, "Turn  Left", Pose(0.0, 0.0, 0.0), continuous=True)
     assert prim.start(0.1, "stop", Pose(0.0, 0.0, 0.0)) == "stopped" and not prim.active
     m = prim.step(0.2, Pose(0.0, 0.0, 0.0), None)
     assert (m.vx, m.wz, m.active) == (0.0, 0.0, False)
+
+
+@pytest.mark.parametrize("blind_from, blind_s", [(0.0, 1.0), (1.0, 1.5)], ids=["at the start", "mid-turn"])
+def test_a_turn_without_scans_for_a_moment_pauses_and_still_ends_on_its_angle(room, blind_from, blind_s):
+    """The scan came late on a busy machine (CI: `asibot nav turn 180` ended "no scan" at once):
+    the turn stands still while it is blind, then goes on, closed-loop on odometry as before."""
+    sim = TinySim(room, pose=START, odom=Pose(0.0, 0.0, 0.0), seed=4)
+    prim = Primitives()
+    now, dt, said = 0.0, 0.05, []
+    prim.start(now, "turn around", sim.odom)
+    while now < 40.0:
+        blind = blind_from <= now < blind_from + blind_s
+        motion = prim.step(now, sim.odom, None if blind else sim.scan())
+        said.append(motion.text)
+        if blind:
+            assert (motion.vx, motion.wz) == (0.0, 0.0) and motion.active, motion
+        if not motion.active:
+            break
+        sim.step(motion.vx, motion.wz, dt)
+        now += dt
+    for _ in range(20):
+        sim.step(0.0, 0.0, dt)
+    assert motion.done and motion.text == "turn around: done", motion
+    assert "waiting: I cannot see obstacles (no scan)" in said and said[-2] == "turn around, 180 deg"
+    assert abs(abs(math.degrees(moved(sim).theta)) - 180.0) <= 3.0 and not sim.collided
 
 
 def test_bad_primitive_is_a_sentence():

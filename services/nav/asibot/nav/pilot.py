@@ -24,7 +24,8 @@ Goals and primitives are exclusive: a primitive cancels the running goal and a g
 running primitive, so one thing at a time drives the base. The emergency stop ends both and
 refuses new ones until it is released; nothing resumes by itself after it. Odometry older than
 `input_timeout` stops whatever runs (the base driver is gone: no closed loop without it); a
-scan older than that counts as no scan (primitives stop, a goal waits: they cannot see).
+scan older than that counts as no scan (a primitive and a goal stand still and wait: they
+cannot see).
 
 Every end of a goal or a primitive is told through `on_event(level, code, text)`.
 """

@@ -16,6 +16,9 @@ target (within 1 cm / 1 deg by odometry), holding its heading on straight steps.
 command the footprint is swept along the motion for the braking distance plus `margin`
 against the scan points (base frame); anything there stops the robot with a sentence
 ("stopped: obstacle ahead, 0.4 m"). Without a scan the robot does not move: it cannot see.
+It stands still and waits for one, as a goal does, for `blind_timeout`, then the primitive
+ends with a sentence: a scan late by a moment (a busy computer, a camera frame dropped) only
+pauses a turn, a perception service that is gone ends it.
 """
 
 from __future__ import annotations
@@ -70,6 +73,7 @@ class Settings:
     longest_s: float = 30.0
     margin: float = 0.12          # m kept free around the swept footprint
     require_scan: bool = True
+    blind_timeout: float = 2.0    # s standing still without a scan before the primitive ends
 
 
 @dataclass
@@ -147,6 +151,7 @@ class Primitives:
         self._name, self._kind, self._dir, self._side = name, kind, direction, side
         self._continuous = continuous
         self._t0, self._start = now, odom
+        self._blind_since: float | None = None
         self._last_theta, self._turned, self._travelled, self._last_xy = odom.theta, 0.0, 0.0, (odom.x, odom.y)
         self._v = SPEEDS[s.speed - 1]
         self._w = TURN_SPEEDS[s.speed - 1]
@@ -162,7 +167,7 @@ class Primitives:
             self._v = self._w * radius
             self._target = math.inf if continuous else (amount or STEPS[s.width - 1])
             what = f"{self._target:.2f} m on a {radius:.1f} m curve" if not continuous else "until you say stop"
-        self.last_text = f"{name}, {what}"
+        self.last_text = self._what = f"{name}, {what}"
         return self.last_text
 
     def stop(self, text: str = "stopped") -> str:
@@ -210,15 +215,27 @@ class Primitives:
             scale = min(1.0, math.sqrt(2 * lim.acc_x * decel * left) / self._v, max(0.03, 1.5 * left) / self._v)
             # backward left ends behind and to the left, as a car backing with the wheel turned left
             vx, wz = self._dir * self._v * scale, self._dir * self._side * self._w * scale
+        if scan is None and self.settings.require_scan:
+            return self._wait_to_see(now)
+        self._blind_since, self.last_text = None, self._what
         blocked = self._obstacle(vx, wz, scan)
         if blocked:
             return self._end(blocked)
         return Motion(vx, wz, True, self.last_text)
 
+    def _wait_to_see(self, now: float) -> Motion:
+        """No scan: stand still for `blind_timeout` (the odometry still counts the way gone),
+        then end."""
+        self._blind_since = now if self._blind_since is None else self._blind_since
+        if now - self._blind_since >= self.settings.blind_timeout:
+            return self._end("stopped: I cannot see obstacles (no scan)")
+        self.last_text = "waiting: I cannot see obstacles (no scan)"
+        return Motion(0.0, 0.0, True, self.last_text)
+
     def _obstacle(self, vx: float, wz: float, scan: LaserScan | None) -> str:
         """A sentence when the swept footprint ahead meets a scan point, else ""."""
         if scan is None:
-            return "stopped: I cannot see obstacles (no scan)" if self.settings.require_scan else ""
+            return ""
         r = np.asarray(scan.ranges, np.float64)
         a = scan.angle_min + scan.angle_increment * np.arange(len(r))
         ok = np.isfinite(r) & (r >= scan.range_min) & (r < scan.range_max)
