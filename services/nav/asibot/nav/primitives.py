@@ -73,7 +73,9 @@ class Settings:
     longest_s: float = 30.0
     margin: float = 0.12          # m kept free around the swept footprint
     require_scan: bool = True
-    blind_timeout: float = 2.0    # s standing still without a scan before the primitive ends
+    # s standing still without a scan before the primitive ends: shorter than a goal's 10 s
+    # (NavParams.blind_timeout), as a person who pressed once for a step is waiting on it
+    blind_timeout: float = 2.0
 
 
 @dataclass
