@@ -213,7 +213,8 @@ def test_the_fridge_is_a_few_presses_from_home_and_the_trip_is_shown_on_the_map(
         screenshot(page, "switch-home-trip")
         presses.to("Go to desk on the map")                           # another place, chosen on the map
         wait_until(lambda: "desk" in ((_nav(apartment)["status"] or {}).get("text") or ""), timeout=10,
-                   message="choosing the desk on the map did not send the robot there")
+                   message=lambda: f"choosing the desk on the map did not send the robot there: nav says "
+                                   f"{_nav(apartment)['status']}; the presses: {presses.trail[-6:]}")
         presses.to("Cancel the trip")
         wait_until(lambda: (_nav(apartment)["status"] or {}).get("state") != "active", timeout=10,
                    message="the trip was not canceled")
