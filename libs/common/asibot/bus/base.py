@@ -213,7 +213,8 @@ class Bus:
 
     def subscribe(self, key: str, msg_type: type[M], callback: Callable[..., object], *,
                   latest: bool = False, with_key: bool = False, maxsize: int = 0,
-                  on_reject: Callable[[str, MessageError], None] | None = None) -> Closable:
+                  on_reject: Callable[[str, MessageError], None] | None = None,
+                  on_latched: Callable[[list[tuple[str, M]]], None] | None = None) -> Closable:
         """Call `callback(msg)` (or `callback(key, msg)`) on a worker thread for every valid message.
 
         Invalid messages are counted, logged (once a second) and dropped; `on_reject(key,
@@ -223,6 +224,11 @@ class Bus:
         for the callback: when it is slower than the stream the oldest waiting one is dropped,
         and nothing else waits for it (not the sender, not the bus's other subscriptions, not
         its calls). `maxsize=1` keeps only the newest (cameras, scans).
+
+        `on_latched(copies)` instead hears every latched copy at once, (key, message) from each
+        process that serves one, on the same thread before the first sample: for a follower
+        that must not let the newest stamp decide, since a sender chooses its stamp (the
+        estop: asibot.safety.estop).
         """
 
         def deliver(k: str, payload: bytes) -> None:
@@ -235,7 +241,11 @@ class Bus:
                 return
             callback(k, msg) if with_key else callback(msg)
 
-        prelude = (lambda: self._newest_latched(key)) if latest else None
+        prelude: Prelude | None = (lambda: self._newest_latched(key)) if latest else None
+        if on_latched is not None:
+            def prelude() -> list[tuple[str, bytes]]:
+                on_latched(self._decoded_copies(key, msg_type))
+                return []
         return self._keep(self._declare_subscriber(key, deliver, maxsize, prelude))
 
     def subscribe_raw(self, key: str, callback: Callable[[str, bytes, int], None], *,
@@ -275,14 +285,24 @@ class Bus:
         if publish:
             self._put(key, payload)
 
+    def _latched_copies(self, key: str) -> list[tuple[str, bytes]]:
+        """Every latched value on `key`, as each process that serves one answers."""
+        return [answer for answer in self._get(key, b"", timeout=1.0) if answer is not None]
+
+    def _decoded_copies(self, key: str, msg_type: type[M]) -> list[tuple[str, M]]:
+        copies = []
+        for k, payload in self._latched_copies(key):
+            try:
+                copies.append((k, messages.decode(msg_type, payload)))
+            except MessageError as exc:
+                self.reject(k, exc)
+        return copies
+
     def _newest_latched(self, key: str) -> list[tuple[str, bytes]]:
         """Current latched values on `key`: per concrete key, the one with the newest stamp
         (two processes may have latched the same key; the later decision wins)."""
         newest: dict[str, tuple[int, bytes]] = {}
-        for answer in self._get(key, b"", timeout=1.0):
-            if answer is None:
-                continue
-            k, payload = answer
+        for k, payload in self._latched_copies(key):
             try:
                 stamp = int(messages.unpack(payload).get("stamp", 0))
             except Exception:

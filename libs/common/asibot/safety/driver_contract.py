@@ -133,7 +133,7 @@ class DriverContract:
         for holder in self.holders.values():
             holder.follow(bus)
         self.estop = EStopState(bus, robot, lambda msg: on_estop(msg.engaged, msg.reason, estop.named(msg)),
-                                self._release_refused)
+                                self._release_refused, self._estop_skewed)
         for c in self.commands:
             bus.subscribe(c.kind.key(robot), c.kind.message, self._receiver(c), with_key=True,
                           on_reject=lambda key, exc, c=c: self.refuse(c.name, exc))
@@ -183,6 +183,9 @@ class DriverContract:
 
     def _release_refused(self, msg: EStop, why: str) -> None:
         self.refusals.event("warning", "release_refused", estop.refused_text(msg, why), reason="estop:release")
+
+    def _estop_skewed(self, msg: EStop, text: str) -> None:
+        self.refusals.event("warning", "estop_clock", text, reason="estop:clock")
 
     def event(self, level: str, code: str, text: str) -> None:
         """Publish one of the driver's own Events (a fault, a recovery, the estop)."""

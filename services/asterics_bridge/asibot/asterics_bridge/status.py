@@ -18,6 +18,7 @@ from typing import Callable
 from asibot import keys
 from asibot import messages as m
 from asibot.bus import Bus
+from asibot.safety.estop import EStopStates
 
 log = logging.getLogger(__name__)
 
@@ -121,7 +122,8 @@ class StatusBoard:
                       maxsize=1)
         bus.subscribe(keys.every_robot(keys.base_battery), m.Battery, self._on_battery, with_key=True,
                       maxsize=1)
-        bus.subscribe(keys.every_robot(keys.estop), m.EStop, self._on_estop, with_key=True)
+        # By the drivers' own rule (asibot.safety.estop): a client hears the state they hold.
+        self.estops = EStopStates(bus, self._on_estop)
 
     def robot(self, robot: str) -> RobotStatus:
         with self._lock:
@@ -163,11 +165,9 @@ class StatusBoard:
     def _on_battery(self, key: str, battery: m.Battery) -> None:
         self._update(key, battery=battery.volts)
 
-    def _on_estop(self, key: str, estop: m.EStop) -> None:
-        found = self._update(key, estop=estop.engaged)
-        if found is None:
-            return
-        robot, _ = found
+    def _on_estop(self, robot: str, estop: m.EStop) -> None:
+        key = keys.estop(robot)
+        self._update(key, estop=estop.engaged)
         why = f" ({estop.reason})" if estop.reason else ""
         if estop.engaged:
             notice = Notice(robot, "estop", f"Emergency stop engaged{why}.", "error", True)

@@ -2,7 +2,7 @@
 
 The web server never asks a robot for its state: it listens, like any other service, to the
 drivers' and controllers' liveliness, the arm, gripper and Cartesian states, the latched
-estop and the events, and keeps the newest of each per robot. The page gets a JSON view of
+estop (by the drivers' own rule) and the events, and keeps the newest of each per robot. The page gets a JSON view of
 that (`Fleet.view`), in the user's units (m and deg), pushed over its WebSocket.
 """
 
@@ -21,6 +21,7 @@ from asibot.bus import Bus
 from asibot.messages import (ArmState, CartState, EStop, Event, GripperState, LaserScan, NavMap, NavPath, NavPose,
                              NavStatus, Odometry)
 from asibot.poses import user_point
+from asibot.safety.estop import EStopStates
 from asibot.web.nav_view import map_json, nav_json
 
 #: Events kept per robot for the page (newest last).
@@ -130,7 +131,9 @@ class Fleet:
         self._follow(keys.nav_path, NavPath, "nav_path")
         self._follow(keys.scan, LaserScan, "scan")
         bus.subscribe(keys.every_robot(keys.nav_map), NavMap, self._on("nav_map"), with_key=True, latest=True)
-        bus.subscribe(keys.every_robot(keys.estop), EStop, self._on("estop"), with_key=True, latest=True)
+        # By the drivers' own rule (asibot.safety.estop), so the page shows the state they hold.
+        on_estop = self._on("estop")
+        self.estops = EStopStates(bus, lambda robot_id, msg: on_estop(keys.estop(robot_id), msg))
         bus.subscribe(keys.every_robot(keys.events), Event, self._on_event, with_key=True, maxsize=200)
 
     def _follow(self, key_of_robot: Callable[[str], str], msg_type: type, attr: str,
