@@ -151,3 +151,20 @@ def say(client: Client, text: str, timeout: float = 5.0) -> str:
                message=f"no answer to {text!r}: {client.lines()}")
     return [ln for ln in client.lines() if ln.startswith(("ok", "error"))][before]
 
+
+class Busy:
+    """TCP clients (NetConnection) each with a `grab` under way, held until `release()`: they
+    are not idle, so no newcomer takes their slots."""
+
+    def __init__(self, bridge: Bridge, clients: list[Client]) -> None:
+        self.gate, self.clients = threading.Event(), clients
+        act = bridge.arm._act
+        bridge.arm._act = lambda req: (self.gate.wait(10), act(req))[1]
+        for c in clients:
+            command(c, "status")
+            c.send(nc.encode_string(1, "grab"))
+        wait_until(lambda: bridge.arm.verbs().count("act") == len(clients), 5,
+                   message=lambda: f"not every grab is under way: {bridge.arm.verbs()}")
+
+    def release(self) -> None:
+        self.gate.set()

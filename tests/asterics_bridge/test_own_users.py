@@ -6,14 +6,17 @@ in-memory bus."""
 import json
 import socket
 
+from unittest.mock import ANY
+
 import pytest
 
 from asibot.testing import wait_until
 
 from asibot.asterics_bridge import netconnection as nc
+from asibot.asterics_bridge import slots
 from asibot.asterics_bridge.servers import Limits
 
-from .harness import HTTP_TOKEN, Bridge, Client, command, say
+from .harness import HTTP_TOKEN, Bridge, Busy, Client, command, say
 from .test_http import request
 
 GRID = "https://grid.asterics.eu"
@@ -125,6 +128,28 @@ def test_bad_json_is_a_sentence_and_changes_nothing(bridge, body):
     assert untouched(bridge)
 
 
+NESTED = "The body's JSON is nested too deeply to read; a command is one flat object, send {\"command\": \"forward\"}."
+
+
+@pytest.mark.parametrize("body, code, answer", [
+    # issue 51: 20 of 1,500 fuzzed bodies were a 500 (RecursionError) instead of a sentence
+    ("[" * 2000 + "]" * 2000, 400, {"ok": False, "code": "bad_request", "error": NESTED}),
+    ("[" * 4000, 400, {"ok": False, "code": "bad_request", "error": NESTED}),
+    ('{"command": ' + "[" * 1500 + "]" * 1500 + "}", 400, {"ok": False, "code": "bad_request", "error": NESTED}),
+    ('{"command": "forward", "robot": ' + "[" * 1500 + "]" * 1500 + "}", 400,
+     {"ok": False, "code": "bad_request", "error": NESTED}),
+    ("[" * 400 + "]" * 400, 400, ANY),          # readable: refused as any other list
+    ("[" * 5000 + "]" * 5000, 413, "error: a command is at most 4096 bytes; this body has 10000.\n"),
+    (json.dumps({"command": "forward " * 600}), 413, ANY),
+])
+def test_deep_or_huge_json_is_refused_with_a_sentence_and_changes_nothing(bridge, body, code, answer):
+    status, _, text = request(bridge, "POST", "/command", body, {"Content-Type": "application/json"})
+    assert status == code, text[:300]
+    assert (json.loads(text) if code == 400 else text) == answer
+    assert untouched(bridge)
+    assert request(bridge, "POST", "/command", "faster")[0] == 200       # and the bridge serves on
+
+
 # ---------------------------------------------------------------- TCP: a web page's fetch to 21112
 def _exchange(port: int, *parts: bytes) -> bytes:
     """Send `parts` (each its own segment) and read until the bridge closes."""
@@ -214,24 +239,47 @@ def _raw_clients(port: int, n: int, first: bytes) -> list[socket.socket]:
     return out
 
 
-def test_two_hundred_half_frames_do_not_lock_out_a_stop(memory_bus):
-    """The reviewer's attack on a bridge with the default limits: 200 clients each sending '@'.
-    A stop still gets through at once, and the slots come free within `partial_s`."""
-    b = Bridge(memory_bus)
-    holders = _raw_clients(b.servers.tcp_port, 200, b"@")
+ROOM = "error: This connection is closed to make room for a new one: "
+
+
+def test_a_client_that_spoke_and_went_silent_loses_its_slot(memory_bus):
+    """Issue 51: a client that sends one line and then nothing held its slot for ever; the
+    first-line deadline was all there was. One that keeps sending something keeps its slot."""
+    b = Bridge(memory_bus, limits=Limits(idle_s=1.0))
+    quiet, chatty = Client(b.servers.tcp_port), Client(b.servers.tcp_port)
     try:
-        wait_until(lambda: b.servers.clients() == Limits.per_address, 10)
+        assert say(quiet, "forward").startswith("ok: forward")
+        assert say(chatty, "status").startswith("ok")
+        # chatty sends an empty line (nothing runs) at every poll, quiet nothing
+        wait_until(lambda: (chatty.send(b"\n"), quiet.closed)[1], 5, interval=0.1,
+                   message="a client silent since its first line still holds its slot")
+        assert quiet.lines()[-1] == ("error: This connection is closed: nothing came for 1 s. Connect again when "
+                                     "you need the robot; a program that keeps its connection sends something (an "
+                                     "empty line, or NetConnection's keepalive) at least every 1 s.")
+        assert not chatty.closed and say(chatty, "faster").startswith("ok")
+        wait_until(lambda: b.servers.clients() == 1)
+        assert b.servers.counters["closed_idle"] == 1
+        # what it started stops, as when it disconnects
+        wait_until(lambda: [r["name"] for r in b.nav.requests("primitive")] == ["forward", "stop"])
+    finally:
+        quiet.close()
+        chatty.close()
+        b.close()
+
+
+def test_fifty_local_clients_that_spoke_once_do_not_lock_out_a_newcomer(memory_bus):
+    """Issue 51's attack with the default limits: 50 local clients send one whole line each and
+    then nothing. A new client's `status` and `turn left` were refused for as long as they
+    stayed; local programs have no per-address share now, and they are below the total."""
+    b = Bridge(memory_bus)
+    holders = _raw_clients(b.servers.tcp_port, 50, b"status\n")
+    try:
+        wait_until(lambda: b.dispatcher.counters["commands"] == 50, 10)
         c = Client(b.servers.tcp_port)
-        c.send(b"stop\n")
-        wait_until(lambda: c.closed, 10)
-        assert c.lines() == ["ok: stopped base and arm",
-                             f"error: 127.0.0.1 holds {Limits.per_address} connections to the bridge already, the "
-                             "most one address may; close one of them, or try again later."]
-        assert b.nav.requests("primitive") == [{"name": "stop"}]
-        wait_until(lambda: b.servers.clients() == 0, Limits.partial_s + 10,
-                   message="the half frames still hold their slots")
-        c = Client(b.servers.tcp_port)
-        assert say(c, "forward").startswith("ok: forward")
+        assert say(c, "status").startswith("ok")
+        assert say(c, "turn left").startswith("ok: turn left")
+        assert say(c, "stop") == "ok: stopped base and arm"
+        assert b.servers.counters["refused_address"] == b.servers.counters["refused_full"] == 0
         c.close()
     finally:
         for s in holders:
@@ -239,7 +287,53 @@ def test_two_hundred_half_frames_do_not_lock_out_a_stop(memory_bus):
         b.close()
 
 
-FULL = "the bridge serves 2 clients at most; try again later."
+def test_a_full_bridge_makes_room_by_closing_the_longest_silent(memory_bus):
+    b = Bridge(memory_bus, limits=Limits(max_clients=3))
+    oldest, *others = holders = [Client(b.servers.tcp_port) for _ in range(3)]
+    try:
+        assert say(oldest, "forward").startswith("ok: forward")
+        for h in others:
+            assert say(h, "status").startswith("ok")
+        newcomer = Client(b.servers.tcp_port)
+        holders.append(newcomer)
+        assert say(newcomer, "status").startswith("ok")
+        wait_until(lambda: oldest.closed, 5, message="the longest silent connection still holds its slot")
+        assert oldest.lines()[-1].startswith(ROOM + "the bridge's 3 slots were all taken, and this one had been "
+                                             "silent the longest (")
+        assert oldest.lines()[-1].endswith(" s). Connect again when you need the robot.")
+        assert not any(h.closed for h in others) and all(say(h, "faster").startswith("ok") for h in others)
+        assert b.servers.counters["closed_for_room"] == 1 and b.servers.counters["refused_full"] == 0
+        # what the closed one started stops, as when it disconnects
+        wait_until(lambda: [r["name"] for r in b.nav.requests("primitive")] == ["forward", "stop"])
+    finally:
+        for h in holders:
+            h.close()
+        b.close()
+
+
+def test_two_hundred_half_frames_do_not_lock_out_a_stop(memory_bus):
+    """The reviewer's attack on a bridge with the default limits: 200 clients each sending '@'.
+    A newcomer takes the slot of one of them (they never sent anything whole), its stop runs at
+    once, and the other slots come free within `partial_s`."""
+    b = Bridge(memory_bus)
+    holders = _raw_clients(b.servers.tcp_port, 200, b"@")
+    try:
+        wait_until(lambda: b.servers.counters["connections"] == 200, 10)
+        assert b.servers.clients() <= Limits.max_clients and b.servers.counters["closed_for_room"] >= 100
+        c = Client(b.servers.tcp_port)
+        assert say(c, "stop") == "ok: stopped base and arm"
+        assert b.nav.requests("primitive") == [{"name": "stop"}]
+        wait_until(lambda: b.servers.clients() == 1, Limits.partial_s + 10,
+                   message="the half frames still hold their slots")
+        assert not c.closed and say(c, "forward").startswith("ok: forward")
+        c.close()
+    finally:
+        for s in holders:
+            s.close()
+        b.close()
+
+
+FULL = "the bridge serves 2 clients at most, and each of them has a command under way; try again in a moment."
 
 
 @pytest.mark.parametrize("first, answers", [
@@ -250,9 +344,8 @@ FULL = "the bridge serves 2 clients at most; try again later."
 def test_a_full_bridge_still_takes_a_stop(memory_bus, first, answers):
     b = Bridge(memory_bus, limits=Limits(max_clients=2))
     holders = [Client(b.servers.tcp_port) for _ in range(2)]
+    busy = Busy(b, holders)
     try:
-        for h in holders:
-            command(h, "status")
         extra = Client(b.servers.tcp_port)
         extra.send(first)
         wait_until(lambda: extra.closed, 5)
@@ -260,6 +353,7 @@ def test_a_full_bridge_still_takes_a_stop(memory_bus, first, answers):
         stops = [{"name": "stop"}] if len(answers) == 2 else []
         assert b.nav.requests("primitive") == stops and b.servers.counters["refused_full"] == 1
     finally:
+        busy.release()
         for h in holders:
             h.close()
         b.close()
@@ -268,34 +362,38 @@ def test_a_full_bridge_still_takes_a_stop(memory_bus, first, answers):
 def test_a_silent_client_of_a_full_bridge_is_told_in_a_line(memory_bus):
     b = Bridge(memory_bus, limits=Limits(max_clients=1, refused_wait_s=0.3))
     holder = Client(b.servers.tcp_port)
+    busy = Busy(b, [holder])
     try:
-        command(holder, "status")
         extra = Client(b.servers.tcp_port)
         wait_until(lambda: extra.closed, 5)
-        assert extra.lines() == ["error: the bridge serves 1 clients at most; try again later."]
+        assert extra.lines() == ["error: the bridge serves 1 clients at most, and each of them has a command under "
+                                 "way; try again in a moment."]
     finally:
+        busy.release()
         holder.close()
         b.close()
 
 
-def test_one_address_cannot_take_every_slot(memory_bus):
-    """On loopback every program is 127.0.0.1; another machine (here 127.0.0.2) keeps its share."""
+def test_another_machine_makes_room_from_its_own_share(memory_bus, monkeypatch):
+    """Another machine (127.0.0.2 plays one: loopback is this machine's) holds at most
+    `per_address`; a newcomer of it over that share takes the slot of its own longest silent
+    connection, never one of this machine's programs."""
+    monkeypatch.setattr(slots, "group_of", lambda host: "127.0.0.2" if host == "127.0.0.2" else slots.LOOPBACK)
     b = Bridge(memory_bus, limits=Limits(max_clients=4, per_address=2))
-    cs = [Client(b.servers.tcp_port) for _ in range(2)]
+    local = Client(b.servers.tcp_port)
+    r1, r2 = remote = [Client(b.servers.tcp_port, source="127.0.0.2") for _ in range(2)]
     try:
-        for c in cs:
-            command(c, "status")
-        third = Client(b.servers.tcp_port)
-        third.send(b"forward\n")
-        wait_until(lambda: third.closed, 5)
-        assert third.lines() == ["error: 127.0.0.1 holds 2 connections to the bridge already, the most one "
-                                 "address may; close one of them, or try again later."]
-        other = Client(b.servers.tcp_port, source="127.0.0.2")
-        cs.append(other)
-        assert say(other, "forward").startswith("ok: forward")
-        assert [r["name"] for r in b.nav.requests("primitive")] == ["forward"]
-        assert b.servers.counters["refused_address"] == 1
+        for c in (r1, local, r2):
+            assert say(c, "status").startswith("ok")
+        r3 = Client(b.servers.tcp_port, source="127.0.0.2")
+        remote.append(r3)
+        assert say(r3, "forward").startswith("ok: forward")
+        wait_until(lambda: r1.closed, 5)
+        assert r1.lines()[-1].startswith(ROOM + "127.0.0.2 held the 2 slots one address may, and this one had "
+                                         "been silent the longest (")
+        assert not local.closed and not r2.closed and say(local, "stop") == "ok: stopped base and arm"
+        assert b.servers.counters["closed_for_room"] == 1 and b.servers.counters["refused_address"] == 0
     finally:
-        for c in cs:
+        for c in [local] + remote:
             c.close()
         b.close()

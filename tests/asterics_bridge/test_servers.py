@@ -11,7 +11,7 @@ from asibot.testing import wait_until
 from asibot.asterics_bridge import netconnection as nc
 from asibot.asterics_bridge.servers import Limits
 
-from .harness import OTHER, ROBOT, Bridge, Client, command, say
+from .harness import OTHER, ROBOT, Bridge, Busy, Client, command, say
 from .test_netconnection import EVENT_1, FORWARD, KEEPALIVE, OBSTACLE
 
 
@@ -237,16 +237,18 @@ def test_fifty_clients_at_once(bridge):
 
 
 def test_beyond_the_client_limit_a_client_is_told_and_closed(memory_bus):
+    """When every slot's client has a command under way, none makes room (test_own_users)."""
     b = Bridge(memory_bus, limits=Limits(max_clients=2))
     cs = [Client(b.servers.tcp_port) for _ in range(2)]
+    busy = Busy(b, cs)
     try:
-        for c in cs:
-            command(c, "status")
         extra = Client(b.servers.tcp_port)
         wait_until(lambda: extra.closed)
-        assert extra.lines() == ["error: the bridge serves 2 clients at most; try again later."]
+        assert extra.lines() == ["error: the bridge serves 2 clients at most, and each of them has a command under "
+                                 "way; try again in a moment."]
         extra.close()
     finally:
+        busy.release()
         for c in cs:
             c.close()
         b.close()

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
 
 from starlette.responses import PlainTextResponse, Response
 
@@ -52,11 +54,9 @@ def command_of(query: Mapping[str, str], headers: Mapping[str, str], body: bytes
         return reply_answer(Reply(False, "The body is not UTF-8 text; send a command such as 'forward'.",
                                   "bad_request"), as_json)
     if ctype == "application/json":
-        try:
-            data = json.loads(text)
-        except ValueError:
-            return reply_answer(Reply(False, "The body is not valid JSON; send {\"command\": \"forward\"}.",
-                                      "bad_request"), as_json)
+        data = parse_json(text)
+        if isinstance(data, JsonRefusal):
+            return reply_answer(Reply(False, data.sentence, "bad_request"), as_json)
         problem = json_problem(data)
         if problem:
             return reply_answer(Reply(False, problem, "bad_request"), as_json)
@@ -67,6 +67,25 @@ def command_of(query: Mapping[str, str], headers: Mapping[str, str], body: bytes
     if robot and not valid_robot(robot):
         return reply_answer(Reply(False, f"{robot[:40]!r} is not a robot id.", "bad_request"), as_json)
     return robot, text
+
+
+@dataclass(frozen=True)
+class JsonRefusal:
+    """Why a body is not JSON the bridge reads."""
+    sentence: str
+
+
+def parse_json(text: str) -> Any:
+    """The JSON value of `text`, or a JsonRefusal. A command is one level deep, but Python's
+    parser recurses for each level of nesting: `[[[[...` of a few KiB would be a
+    RecursionError (a 500), and is a bad request like any other bad JSON."""
+    try:
+        return json.loads(text)
+    except RecursionError:
+        return JsonRefusal("The body's JSON is nested too deeply to read; a command is one flat object, "
+                           "send {\"command\": \"forward\"}.")
+    except ValueError:
+        return JsonRefusal("The body is not valid JSON; send {\"command\": \"forward\"}.")
 
 
 def json_problem(data: object) -> str | None:

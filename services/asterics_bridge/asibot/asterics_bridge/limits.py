@@ -13,9 +13,10 @@ KEEPALIVE_S = 7.75
 class Limits:
     """What one client may take, so that no client (nor a web page) can take the bridge from
     the others; tests make them small."""
-    max_clients: int = 100
-    per_address: int = 50               # TCP clients from one address (on loopback: every local one)
+    max_clients: int = 100              # TCP clients at once; when all are taken, the longest silent makes room
+    per_address: int = 50               # TCP clients from one address other than loopback (`slots.group_of`)
     first_item_s: float = 15.0          # to send the first whole frame or line (the plugin: a keepalive after 9 s)
+    idle_s: float = 300.0               # silent that long once it spoke (no line, no frame, no keepalive): closed
     partial_s: float = 5.0              # to finish a frame or line once started
     refused_waiting: int = 200          # clients over the limits given a moment to send a stop
     refused_wait_s: float = 2.0         # how long such a client may take to send it

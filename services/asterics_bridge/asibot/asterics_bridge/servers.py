@@ -11,9 +11,13 @@ Both run on one asyncio loop in a thread of their own; commands run on a small t
   skipped; a client sending `Limits.bad_frames` bad frames is dropped;
 - a connection must send its first whole frame or line within `Limits.first_item_s`, and
   finish any frame or line it starts within `Limits.partial_s` (a client sending only `@`
-  holds nothing for long); a NetConnection plugin sends a keepalive after 9 s of silence;
-- beyond `Limits.max_clients`, or `Limits.per_address` from one address, a new client is
-  told so and closed, but a `stop` it sends first is obeyed (a full bridge still stops);
+  holds nothing for long); once it spoke, it must send something (a line, a frame, a
+  keepalive) at least every `Limits.idle_s`; a NetConnection plugin sends a keepalive after 9 s
+  of silence;
+- beyond `Limits.max_clients`, or `Limits.per_address` from one address that is not this
+  machine's, the connection silent the longest makes room for a new client (`slots`); only when
+  every one has a command under way is the new client told so and closed, and a `stop` it
+  sends first is obeyed then (a full bridge still stops);
 - HTTP heads, bodies and idle keep-alive connections are bounded (`http_bounds`, `http_server`).
 When a client goes away, its command in flight finishes first, then the dispatcher stops a
 motion it started (`Dispatcher.close_session`).
@@ -37,6 +41,7 @@ from asibot.local_http import Callers
 
 from asibot.asterics_bridge import lines
 from asibot.asterics_bridge import netconnection as nc
+from asibot.asterics_bridge import slots
 from asibot.asterics_bridge import vocabulary as vocab
 from asibot.asterics_bridge.dispatcher import Dispatcher, Reply, Session
 from asibot.asterics_bridge.http_app import HttpEntry
@@ -60,11 +65,12 @@ CLOSE_S = 3.0
 class _Client:
     """One TCP client: its session, its protocol, and how to talk back to it."""
 
-    def __init__(self, bridge: "Servers", writer: asyncio.StreamWriter, session: Session, address: str) -> None:
-        self.bridge, self.writer, self.session, self.address = bridge, writer, session, address
+    def __init__(self, bridge: "Servers", writer: asyncio.StreamWriter, session: Session, group: str) -> None:
+        """`group`: the address it is counted under (`slots.group_of`)."""
+        self.bridge, self.writer, self.session, self.group = bridge, writer, session, group
         self.protocol: str | None = None
         self.spoke = False            # a whole frame or line came
-        self.last_sent = time.monotonic()
+        self.heard = self.last_sent = time.monotonic()     # the last whole frame or line came; the last sent
         self.queue: asyncio.Queue[str | None] = asyncio.Queue()     # None: the client went away
         self.in_flight: asyncio.Future | None = None
         self.bad = 0
@@ -95,9 +101,23 @@ class _Client:
         elif self.protocol == lines.TEXT:
             self.send(lines.encode_line(f"{'alarm' if n.alarm else 'event'} {n.phrase}: {n.text}"))
 
+    @property
+    def busy(self) -> bool:
+        """A command of it waits or runs: its answer is due, so it is not idle."""
+        return self.in_flight is not None or not self.queue.empty()
+
     def abort(self) -> None:
         self.closed = True
         self.writer.transport.abort()
+
+    def close(self) -> None:
+        """Close once what was written has gone out; a peer that left output unread is cut off
+        (its reader then sees the end, and its handler stops what it started)."""
+        self.closed = True
+        if self.writer.transport.get_write_buffer_size():
+            self.writer.transport.abort()
+        else:
+            self.writer.transport.close()
 
 
 class Servers:
@@ -115,8 +135,8 @@ class Servers:
         self.http_token, self.callers = http_token, callers
         self.events = dict(events or {})
         self.counters = {"connections": 0, "refused_full": 0, "refused_address": 0, "stops_when_full": 0,
-                         "closed_idle": 0, "refused_http_like": 0, "refused_bad_first_line": 0, "dropped_slow": 0,
-                         "dropped_bad": 0, "bad_frames": 0, "http_requests": 0, "refused_host": 0,
+                         "closed_idle": 0, "closed_for_room": 0, "refused_http_like": 0, "refused_bad_first_line": 0,
+                         "dropped_slow": 0, "dropped_bad": 0, "bad_frames": 0, "http_requests": 0, "refused_host": 0,
                          "refused_origin": 0, "refused_token": 0}
         self._clients: set[_Client] = set()
         self._waiting = 0              # clients over the limits, given a moment to send a stop
@@ -209,13 +229,17 @@ class Servers:
         if handler is not None:      # always: asyncio's servers run each connection as a task
             self._handlers.add(handler)
             handler.add_done_callback(self._handlers.discard)
-        refusal = self._slot_refusal(address)
-        if refusal is not None:
-            await self._refuse(reader, writer, peer, refusal)
+        group = slots.group_of(address)
+        room = slots.room_for(group, [c for c in self._clients if not c.closed], self.limits)
+        if room.refusal is not None:
+            self.counters["refused_address" if room.limit == "address" else "refused_full"] += 1
+            await self._refuse(reader, writer, peer, room.refusal)
             return
+        if room.victim is not None:
+            self._make_room(room.victim, room.limit)
         self.counters["connections"] += 1
         session = self.dispatcher.open_session(peer)
-        client = _Client(self, writer, session, address)
+        client = _Client(self, writer, session, group)
 
         def notify(notice: Notice) -> None:
             self._loop.call_soon_threadsafe(client.notice, notice)
@@ -237,18 +261,20 @@ class Servers:
             await self._loop.run_in_executor(self._pool, self.dispatcher.close_session, session)
             writer.close()
 
-    def _slot_refusal(self, address: str) -> str | None:
-        """Why a new client from `address` gets no slot, or None when it does: the bridge is
-        full, or that address holds its share (on loopback every local program is one address)."""
-        if len(self._clients) >= self.limits.max_clients:
-            self.counters["refused_full"] += 1
-            return f"the bridge serves {self.limits.max_clients} clients at most; try again later."
-        held = sum(1 for c in self._clients if c.address == address)
-        if held >= self.limits.per_address:
-            self.counters["refused_address"] += 1
-            return (f"{address} holds {held} connections to the bridge already, the most one address may; "
-                    "close one of them, or try again later.")
-        return None
+    def _make_room(self, victim: _Client, limit: str) -> None:
+        """Close `victim`, the connection silent the longest, so that a new client gets its slot
+        (`slots.room_for`): it is told why, and its handler stops what it started."""
+        idle = time.monotonic() - victim.heard
+        taken = (f"the bridge's {self.limits.max_clients} slots were all taken" if limit == "full" else
+                 f"{victim.group} held the {self.limits.per_address} slots one address may")
+        self.counters["closed_for_room"] += 1
+        log.info("closing %s, silent for %.0f s, to make room for a new client: %s", victim.session.peer, idle,
+                 taken)
+        silent = f"had been silent the longest ({idle:.1f} s)" if victim.spoke else f"had sent nothing in {idle:.1f} s"
+        victim.answer(Reply(False, f"This connection is closed to make room for a new one: {taken}, and this one "
+                                   f"{silent}. Connect again when you need the robot.", "busy"))
+        self._clients.discard(victim)
+        victim.close()
 
     async def _refuse(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, peer: str,
                       refusal: str) -> None:
@@ -351,6 +377,8 @@ class Servers:
                     client.spoke = True
                 self._take(client, item)
             now = time.monotonic()
+            if items:
+                client.heard = now
             if not decoder.partial():
                 partial_since = None
             elif items or partial_since is None:
@@ -360,22 +388,27 @@ class Servers:
     async def _receive(self, reader: asyncio.StreamReader, client: _Client, started: float,
                        partial_since: float | None) -> bytes:
         """The next bytes, or b"" (close) once the client is late: its first whole frame or line
-        after `Limits.first_item_s`, the rest of one it began after `Limits.partial_s`."""
-        deadlines = [] if client.spoke else [(started + self.limits.first_item_s,
-                                              f"nothing whole came in {self.limits.first_item_s:g} s")]
+        after `Limits.first_item_s`, the rest of one it began after `Limits.partial_s`, anything
+        whole after `Limits.idle_s` of silence once it spoke (a slot is not held by a client
+        that spoke once and went quiet)."""
+        whole = "Connect again and send a whole command at once (a line, or a NetConnection frame)."
+        limits = self.limits
+        if client.spoke:
+            deadlines = [(client.heard + limits.idle_s, f"nothing came for {limits.idle_s:g} s",
+                          "Connect again when you need the robot; a program that keeps its connection sends something "
+                          f"(an empty line, or NetConnection's keepalive) at least every {limits.idle_s:g} s.")]
+        else:
+            deadlines = [(started + limits.first_item_s, f"nothing whole came in {limits.first_item_s:g} s", whole)]
         if partial_since is not None:
-            deadlines.append((partial_since + self.limits.partial_s,
-                              f"a frame or line was begun and not finished in {self.limits.partial_s:g} s"))
-        if not deadlines:
-            return await reader.read(4096)
-        deadline, why = min(deadlines)
+            deadlines.append((partial_since + limits.partial_s,
+                              f"a frame or line was begun and not finished in {limits.partial_s:g} s", whole))
+        deadline, why, advice = min(deadlines)
         try:
             return await asyncio.wait_for(reader.read(4096), max(0.0, deadline - time.monotonic()))
         except asyncio.TimeoutError:
             self.counters["closed_idle"] += 1
             log.info("closing %s: %s", client.session.peer, why)
-            client.answer(Reply(False, f"This connection is closed: {why}. Connect again and send a whole "
-                                       "command at once (a line, or a NetConnection frame).", "timeout"))
+            client.answer(Reply(False, f"This connection is closed: {why}. {advice}", "timeout"))
             client.closed = True
             return b""
 

@@ -82,10 +82,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="NetConnection event ports to commands (default '1=next,2=select,3=stop')")
     p.add_argument("--menu", default=",".join(DEFAULT_MENU),
                    help="the commands 'next'/'previous' announce and 'select' runs, comma-separated")
-    p.add_argument("--max-clients", type=int, default=Limits.max_clients, help="TCP clients at once (default 100)")
+    p.add_argument("--max-clients", type=int, default=Limits.max_clients,
+                   help=f"TCP clients at once (default {Limits.max_clients}); when all are taken, the one silent the "
+                        "longest makes room for a new one")
     p.add_argument("--max-clients-per-address", type=int, default=Limits.per_address,
-                   help=f"TCP clients from one address (default {Limits.per_address}; on loopback every program of "
-                        "this machine is one address)")
+                   help=f"TCP clients from one other machine (default {Limits.per_address}); this machine's own "
+                        "programs (loopback) have no share of their own")
 
 
 def build(bus: Bus, args: argparse.Namespace) -> BridgeService:
