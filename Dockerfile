@@ -55,14 +55,16 @@ RUN apt-get update \
  && apt-get clean && rm -rf /var/lib/apt/lists/* /var/cache/apt/archives/*.deb \
  && useradd --create-home --uid 1000 --shell /usr/sbin/nologin asibot \
  && mkdir -p /app/recordings /data \
- && chown asibot:asibot /app/recordings /data
+ && chown asibot:asibot /app/recordings /data \
+ && chmod 0700 /app/recordings /data
 ENV PATH=/opt/asibot/bin:$PATH \
     PYTHONUNBUFFERED=1 \
     MUJOCO_GL=osmesa \
     ASIBOT_DATA=/data
 WORKDIR /app
 USER asibot
-# Recordings and user data live in volumes, never in the image.
+# Recordings and user data live in volumes, never in the image; both 0700, as a new named
+# volume copies them (recordings hold the page's microphone audio and the camera pictures).
 VOLUME ["/app/recordings", "/data"]
 CMD ["asibot", "--help"]
 # Last: the one layer a change of our code rebuilds (the settings above are cached).

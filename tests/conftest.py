@@ -24,6 +24,14 @@ from asibot import testing  # noqa: E402
 
 
 @pytest.fixture
+def permissive_umask():
+    """The umask most desktops have: without care, folders 0755 and files 0644."""
+    old = os.umask(0o022)
+    yield
+    os.umask(old)
+
+
+@pytest.fixture
 def memory_bus(request):
     """Every Bus() this test opens joins one in-memory bus, with no router; the endpoint."""
     with testing.memory_bus(request.node.nodeid) as endpoint:

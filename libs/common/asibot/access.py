@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Callable
 
 from asibot import certificates, keys
+from asibot.files import open_private, private_dir
 
 ACCESS_ENV = "ASIBOT_ACCESS"
 ROLE_ENV = "ASIBOT_ROLE"
@@ -161,9 +162,8 @@ def default_folder() -> Path:
 
 
 def _write_private(path: Path, text: str) -> None:
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
+    with open_private(path, "xb") as f:
+        f.write(text.encode())
 
 
 def ensure_credentials(folder: Path | str | None = None) -> Path:
@@ -175,8 +175,7 @@ def ensure_credentials(folder: Path | str | None = None) -> Path:
     which every client gets.
     """
     folder = (Path(folder) if folder else default_folder()).absolute()   # children run elsewhere
-    folder.mkdir(parents=True, exist_ok=True, mode=0o700)
-    os.chmod(folder, 0o700)
+    private_dir(folder)
     dictionary = folder / DICTIONARY
     if not dictionary.exists():
         logins = {role: secrets.token_urlsafe(24) for role in ROLES if role != "reader"}

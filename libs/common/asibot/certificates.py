@@ -22,6 +22,8 @@ import socket
 from pathlib import Path
 from typing import Any
 
+from asibot.files import open_private, private_dir
+
 CA, CA_KEY, ROUTER, ROUTER_KEY = "ca.pem", "ca.key", "router.pem", "router.key"
 #: Years a certificate holds: a robot at home is not re-keyed every few months.
 YEARS = 10
@@ -57,8 +59,7 @@ def alt_names(names: list[str]) -> Any:
 
 def _write_private(path: Path, data: bytes) -> None:
     tmp = path.with_name(path.name + ".tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(fd, "wb") as f:
+    with open_private(tmp, "wb") as f:
         f.write(data)
     os.replace(tmp, path)
 
@@ -79,7 +80,7 @@ def ensure_router_certificate(folder: Path, names: list[str] | None = None) -> t
     now = datetime.datetime.now(datetime.timezone.utc)
     start, end = now - datetime.timedelta(minutes=5), now + datetime.timedelta(days=365 * YEARS)
     pem, pkcs8, nothing = serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()
-    folder.mkdir(parents=True, exist_ok=True, mode=0o700)
+    private_dir(folder)
 
     if ca_path.exists() and (folder / CA_KEY).exists():
         ca = x509.load_pem_x509_certificate(ca_path.read_bytes())

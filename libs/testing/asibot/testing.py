@@ -170,6 +170,12 @@ def signed_raw(controller: Any, cls: type, payload: dict) -> bytes:
     return messages.encode(controller.sign(msg))
 
 
+def file_mode(path: Any) -> int:
+    """The permission bits of `path` (0o600 ...), for tests of what is private."""
+    import stat
+    return stat.S_IMODE(os.stat(path).st_mode)
+
+
 def release(bus: Any, robot: str, reason: str = "released by a test", by: str = "a test") -> EStop:
     """Release the estop of `robot` as people and programs do: signed (asibot.safety.estop)."""
     return estop.latch(bus, robot, Identity("test"), False, reason, by)

@@ -10,6 +10,11 @@ unknown). raw writes each value as its byte. scale picks, for each value, a grey
 back to it; unknown cells cannot be told in scale mode without an alpha channel, which PGM
 has not, so such a save is refused with a sentence rather than silently changed. The image is
 always a binary PGM, as map_saver writes.
+
+A robot's maps folder (the service's map_save and save_map, which a user's program may call)
+is bounded: at most MAX_MAPS maps and MAX_MAPS_BYTES of files in it. A save past either is
+refused, with a sentence that says how much is kept and how to free room, before anything is
+written; saving over a map of the same name counts only what it adds.
 """
 
 from __future__ import annotations
@@ -31,6 +36,10 @@ from asibot.rosmap import MODES, MapFileError, MapSettings, occupancy_values, re
 SAVER_OCCUPIED, SAVER_FREE = 0.65, 0.196
 #: map_saver's value thresholds: free is 0..25, occupied is >= 65.
 SAVER_FREE_MAX, SAVER_OCCUPIED_MIN = 25, 65
+#: How much a robot's maps folder keeps: maps (a YAML and its image each), and the bytes of
+#: every file in it. A home's map at 5 cm is a few hundred KiB (the sim apartment's: 43 KiB).
+MAX_MAPS = 20
+MAX_MAPS_BYTES = 64 * 1024 * 1024
 
 
 @dataclass
@@ -94,8 +103,53 @@ def yaml_text(image: str, info: GridInfo, mode: str) -> str:
             f"negate: 0\noccupied_thresh: {SAVER_OCCUPIED}\nfree_thresh: {SAVER_FREE}\nmode: {mode}\n")
 
 
-def save_map(grid: OccupancyGrid, yaml_path: str | os.PathLike[str], mode: str = "trinary") -> tuple[Path, Path]:
+def _size_text(n: float) -> str:
+    if n < 1024 * 1024:
+        return f"{n / 1024:.0f} KiB" if n >= 1024 else f"{int(n)} bytes"
+    return f"{n / 2**20:.1f}".removesuffix(".0") + " MiB"
+
+
+def _folder_bytes(folder: Path) -> int:
+    total = 0
+    for top, _dirs, files in os.walk(folder):
+        for f in files:
+            try:
+                total += os.lstat(os.path.join(top, f)).st_size
+            except OSError:
+                pass
+    return total
+
+
+def _file_bytes(path: Path) -> int:
+    try:
+        return path.lstat().st_size
+    except OSError:
+        return 0
+
+
+def check_room(path: Path, size: int, owner: str = "this robot") -> None:
+    """Refuse, with a sentence, a map of `size` bytes saved as `path` that would take its
+    folder past MAX_MAPS maps or MAX_MAPS_BYTES; a map saved over one of the same name counts
+    only what it adds."""
+    folder = path.parent
+    maps = [p for p in folder.iterdir() if p.suffix in (".yaml", ".yml") and p.is_file()]
+    used = _folder_bytes(folder)
+    how = (f"Save over a map you no longer use (the same name replaces it) or delete old maps in {folder}.")
+    replaced = path.is_file()
+    if not replaced and len(maps) >= MAX_MAPS:
+        raise MapError(f"There are {len(maps)} maps of {owner} already, the most kept (they take {_size_text(used)} "
+                       f"of {_size_text(MAX_MAPS_BYTES)}), so the map was not saved. {how}")
+    grows = size - (_file_bytes(path) + _file_bytes(path.with_suffix(".pgm")) if replaced else 0)
+    if grows > 0 and used + grows > MAX_MAPS_BYTES:
+        raise MapError(f"The maps of {owner} take {_size_text(used)} of {_size_text(MAX_MAPS_BYTES)} ({len(maps)} maps, "
+                       f"at most {MAX_MAPS}); this one needs {_size_text(grows)} more, so it was not saved. {how}")
+
+
+def save_map(grid: OccupancyGrid, yaml_path: str | os.PathLike[str], mode: str = "trinary",
+             bounded: str | None = None) -> tuple[Path, Path]:
     """Write `grid` as <name>.pgm + <name>.yaml (map_saver's format); returns both paths.
+    `bounded` (the robot whose maps folder it is): refused first, nothing written, when the
+    folder has no room for it (`check_room`).
 
     The image is written before the YAML, each atomically, so a reader never sees a YAML
     that names a half-written image."""
@@ -108,6 +162,9 @@ def save_map(grid: OccupancyGrid, yaml_path: str | os.PathLike[str], mode: str =
         raise MapError(f"Cannot save the map: the folder {path.parent} does not exist.")
     image = path.with_suffix(".pgm")
     img = np.flipud(values_to_pixels(grid.data, mode))
-    write_atomic(image, pgm_bytes(np.ascontiguousarray(img)))
-    write_atomic(path, yaml_text(image.name, grid.info, mode).encode())
+    pgm, yaml = pgm_bytes(np.ascontiguousarray(img)), yaml_text(image.name, grid.info, mode).encode()
+    if bounded is not None:
+        check_room(path, len(pgm) + len(yaml), bounded)
+    write_atomic(image, pgm)
+    write_atomic(path, yaml)
     return path, image

@@ -25,11 +25,12 @@ import yaml
 
 from asibot.errors import quote
 from asibot.nav.errors import NavError
-from asibot.files import data_dir, write_atomic
+from asibot.files import data_dir, private_dir, write_atomic
 from asibot.nav.geometry import Pose, as_pose
 from asibot.nav.grid import GridInfo
 
 MAX_NAME = 40
+#: Places kept for one robot (its file stays small: at most a few tens of KiB).
 MAX_PLACES = 200
 MAX_FILE_BYTES = 256 * 1024
 _ALLOWED = " -_'."
@@ -164,7 +165,9 @@ class Places:
             raise NavError(f"There is already a place called {existing!r}; rename or remove it first, "
                            "or save it again to move it.")
         if existing is None and len(self._places) >= MAX_PLACES:
-            raise NavError(f"There are already {MAX_PLACES} places; remove one first.")
+            raise NavError(f"There are already {len(self._places)} places, the most I keep ({MAX_PLACES}), so "
+                           f"{tidy!r} was not saved: remove one you no longer use first (Remove on the Base page, "
+                           "or remove_place).")
         places = dict(self._places)
         if existing is not None:
             places.pop(existing)
@@ -202,6 +205,6 @@ class Places:
 
     def _commit(self, places: dict[str, Pose], saved: Pose | None) -> None:
         """Write first, then change memory: a failed write changes nothing."""
-        self.user_file.parent.mkdir(parents=True, exist_ok=True)
+        private_dir(self.user_file.parent)
         write_atomic(self.user_file, _dump(places, saved))
         self._places, self._saved = places, saved

@@ -35,7 +35,7 @@ from asibot import messages as m
 from asibot.bus import Bus
 from asibot.errors import RpcError, quote
 from asibot.safety.estop import EStopState
-from asibot.files import data_dir
+from asibot.files import data_dir, private_dir
 from asibot.runtime import Service, robot_id
 from asibot.timing import Ticker
 from asibot.verbs import Verb
@@ -299,16 +299,17 @@ class NavService(Service):
 
     def _rpc_save_map(self, now: float, args: SimpleNamespace) -> dict:
         """Write the map in use as map_server YAML + PGM under the user's maps folder."""
-        yaml_path, pgm = save_map(self.pilot.grid, self._map_path(args.name))
+        yaml_path, pgm = save_map(self.pilot.grid, self._map_path(args.name), bounded=self.robot)
         return {"yaml": str(yaml_path), "pgm": str(pgm)}
 
     def _map_path(self, name: str) -> Path:
-        """data_dir()/nav/<robot>/maps/<name>.yaml (the folder made); NavError for a path."""
+        """data_dir()/nav/<robot>/maps/<name>.yaml (the folder made); NavError for a path. The
+        folder is bounded (mapfile.MAX_MAPS, MAX_MAPS_BYTES): save_map checks it."""
         if "/" in name or "\\" in name or name.startswith("."):
             raise NavError(f"A map name is a plain name, not a path; got {quote(name, 40)}.")
         name = check_name(name)
         folder = data_dir() / "nav" / self.robot / "maps"
-        folder.mkdir(parents=True, exist_ok=True)
+        private_dir(folder)
         return folder / f"{name}.yaml"
 
     def _rpc_map_start(self, now: float, args: SimpleNamespace) -> dict:
@@ -326,7 +327,7 @@ class NavService(Service):
         localise and navigate on it from now on (mapping ends)."""
         path = self._map_path(args.name)
         summary = self.pilot.mapper.summary() if self.pilot.mapper is not None else ""
-        yaml_path, pgm = save_map(self.pilot.map_grid(), path)
+        yaml_path, pgm = save_map(self.pilot.map_grid(), path, bounded=self.robot)
         reply = {"yaml": str(yaml_path), "pgm": str(pgm), "text": f"saved the map {path.stem!r} ({summary})"}
         if args.use:
             loaded = load_map(yaml_path)     # what was written, exactly as a restart would read it

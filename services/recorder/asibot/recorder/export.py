@@ -18,6 +18,7 @@ import foxglove
 from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
 from asibot.errors import MessageError
+from asibot.files import open_private, private_dir
 from asibot.messages import decode_any
 from asibot.recorder.channels import Channels
 from asibot.recorder.conversions import convert
@@ -48,7 +49,7 @@ def _write(records: Reading, output: Path, summary: ExportSummary) -> None:
     context = foxglove.Context()       # this export's channels only
     channels = Channels(context)
     options = MCAPWriteOptions(compression=MCAPCompression.Zstd, profile="")
-    with open(output, "wb") as f:
+    with open_private(output, "wb") as f:      # 0600: it holds what the recording holds
         with foxglove.open_mcap(f, context=context, writer_options=options):
             for rec in records:
                 try:
@@ -73,15 +74,18 @@ def export_foxglove(source: Path | str, output: Path | str | None = None, *, fol
     A recording still being written is exported as it was when the export began; with
     `follow`, the export goes on with what the recorder appends until it closes the file or
     `stop` is set. The output appears atomically: a crash leaves no half-written file under
-    its name, and the source recording is never touched.
+    its name, and the source recording is never touched. It is 0600, as recordings are
+    (asibot.files.open_private), in a folder made 0700 if missing.
     """
     source = Path(source)
     check_recording(source)
+    chosen = output is not None
     output = Path(output) if output is not None else default_output(source)
     if output.resolve() == source.resolve():
         raise ValueError(f"the export would overwrite the recording {source}; choose another output file")
     summary = ExportSummary(source, output)
-    output.parent.mkdir(parents=True, exist_ok=True)
+    # recordings/foxglove/ is ours, made or found 0700; a folder the user chose is only made if missing.
+    private_dir(output.parent, tighten=not chosen)
     tmp = output.with_name(f".{output.name}.partial")
     records = Reading(source, follow=follow, stop=stop)
     try:

@@ -6,13 +6,19 @@ most the last second; `asibot.recorder.reader.iter_messages` reads such a file u
 complete chunk.
 
     python -m asibot.recorder [--dir recordings] [--exclude 'rb/*/camera/**'] [--camera-hz 2]
-        [--max-bytes 10G] [--max-age-days DAYS] [--max-file-bytes 500M]
+        [--max-bytes 10G] [--max-age-days DAYS] [--max-file-bytes 500M] [--no-audio] [--no-pictures]
 
 A session is split into parts of at most `--max-file-bytes` (plus one chunk), so rotation can
 delete a long session piece by piece and each file stays quick to export. Camera images are
 recorded at `--camera-hz` (`asibot.recorder.thinning`), and the folder is kept within
 `--max-bytes` (and `--max-age-days`, when given) by deleting the oldest recordings
 (`asibot.recorder.rotation`).
+
+Recordings hold what the stack hears and sees: the web page's microphone audio
+(`voice/audio/<source>`) and the cameras' pictures (`rb/<robot>/camera/<name>/depth|rgb`).
+The folder is 0700 and every file 0600 (asibot.files.private_dir, open_private), so no other
+user of the machine, and no user program in its sandbox, reads them; `--no-audio` and
+`--no-pictures` (or $ASIBOT_RECORD_WITHOUT=audio,pictures) leave them out altogether.
 """
 
 from __future__ import annotations
@@ -28,10 +34,11 @@ from pathlib import Path
 from typing import BinaryIO, Callable
 
 from asibot import keys, runtime
+from asibot.files import open_private, private_dir
 from asibot.recorder.live import hold_writer_lock
 from asibot.recorder.reader import payload_type
 from asibot.recorder.rotation import DEFAULT_MAX_AGE_DAYS, DEFAULT_MAX_BYTES, Retention, describe, prune
-from asibot.recorder.thinning import DEFAULT_CAMERA_HZ, CameraThinner
+from asibot.recorder.thinning import DEFAULT_CAMERA_HZ, IMAGE_PATTERNS, CameraThinner
 from asibot.recorder.writer import TYPE_METADATA, LeanWriter
 
 log = logging.getLogger("asibot.recorder")
@@ -51,6 +58,24 @@ PRUNE_PERIOD_S = 60.0
 """How often the folder is checked against the limits, besides at start and at each new part."""
 
 
+WITHOUT_ENV = "ASIBOT_RECORD_WITHOUT"
+"""What recordings leave out, comma-separated: `audio`, `pictures` (--no-audio, --no-pictures)."""
+LEFT_OUT = {"audio": (keys.ALL_VOICE_AUDIO,), "pictures": IMAGE_PATTERNS}
+"""The keys each of them stands for: the microphones' audio, the cameras' images (not their
+calibrations, `info`, which hold nothing of the room)."""
+
+
+def without_from_env(value: str | None = None) -> set[str]:
+    """The words of $ASIBOT_RECORD_WITHOUT (`audio,pictures`); ValueError for another word."""
+    text = os.environ.get(WITHOUT_ENV, "") if value is None else value
+    words = {w for w in re.split(r"[\s,]+", text.strip().lower()) if w and w != "none"}
+    unknown = sorted(words - LEFT_OUT.keys())
+    if unknown:
+        raise ValueError(f"{WITHOUT_ENV}={text!r}: {', '.join(unknown)} is not one of "
+                         f"{', '.join(LEFT_OUT)} (what recordings may leave out, comma-separated)")
+    return words
+
+
 _WRITE, _THIN, _SKIP = object(), object(), object()
 """What the recorder does with a key's samples: write each, thin them (camera images), skip them."""
 
@@ -65,10 +90,11 @@ class McapRecorder:
 
     def __init__(self, path: Path, flush_period: float = 1.0, chunk_size: int = 1 << 20) -> None:
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        if self.path.exists():
-            raise FileExistsError(f"{self.path} exists; a recording is never overwritten")
-        self._file: BinaryIO = open(self.path, "wb")
+        private_dir(self.path.parent)       # 0700: a recording holds the user's voice and pictures
+        try:
+            self._file: BinaryIO = open_private(self.path, "xb")     # 0600, whatever the umask
+        except FileExistsError:
+            raise FileExistsError(f"{self.path} exists; a recording is never overwritten") from None
         hold_writer_lock(self._file)
         self._writer = LeanWriter(self._file, chunk_size=chunk_size)
         self._writer.start(profile=PROFILE, library="asibot recorder")
@@ -194,12 +220,16 @@ class Session:
 
 
 class RecorderService(runtime.Service):
-    """Subscribes to every key and hands each sample, unless excluded or a camera frame over
-    the rate, to a Session; keeps the folder within the retention limits."""
+    """Subscribes to every key and hands each sample, unless excluded, left out (`without`:
+    `audio`, `pictures`, LEFT_OUT) or a camera frame over the rate, to a Session; keeps the
+    folder within the retention limits."""
 
     def __init__(self, bus, directory: Path, label: str = "", exclude: list[str] | None = None,
                  camera_hz: float = DEFAULT_CAMERA_HZ, retention: Retention = Retention(),
-                 max_file_bytes: int = DEFAULT_MAX_FILE_BYTES) -> None:
+                 max_file_bytes: int = DEFAULT_MAX_FILE_BYTES, without: tuple[str, ...] | set[str] = ()) -> None:
+        unknown = sorted(set(without) - LEFT_OUT.keys())
+        if unknown:
+            raise ValueError(f"recordings can leave out {' and '.join(LEFT_OUT)}, not {', '.join(unknown)}")
         if retention.max_bytes and max_file_bytes and retention.max_bytes < 2 * max_file_bytes:
             raise ValueError(f"--max-bytes ({retention.max_bytes}) must be at least twice --max-file-bytes "
                              f"({max_file_bytes}), or the file being written alone would fill it: "
@@ -207,7 +237,8 @@ class RecorderService(runtime.Service):
         self.thinner = CameraThinner(camera_hz)
         self.retention = retention
         self.directory = Path(directory)
-        self.exclude = list(exclude or [])
+        self.without = sorted(without)
+        self.exclude = list(exclude or []) + [p for what in self.without for p in LEFT_OUT[what]]
         self._routes: dict[str, object] = {}  # key -> _WRITE, _THIN or _SKIP
         self.skipped = 0
         self.removed = 0
@@ -217,8 +248,9 @@ class RecorderService(runtime.Service):
         self._pruner = threading.Thread(target=self._prune_loop, name="recordings-rotation", daemon=True)
         self._pruner.start()
         self._sub = bus.subscribe_raw(keys.EVERYTHING, self._on_sample, maxsize=RING)
-        log.info("recording to %s (camera images at %s, folder kept within %s)", self.recorder.path,
-                 f"{camera_hz:g} Hz" if camera_hz else "every frame", describe(retention))
+        log.info("recording to %s (camera images at %s, folder kept within %s%s)", self.recorder.path,
+                 f"{camera_hz:g} Hz" if camera_hz else "every frame", describe(retention),
+                 f"; without {' and '.join(self.without)}" if self.without else "")
 
     def _on_sample(self, key: str, payload: bytes, t_ns: int) -> None:
         # Every sample of the stack passes here: one dict lookup decides what a key gets.
@@ -248,7 +280,7 @@ class RecorderService(runtime.Service):
     def health(self) -> dict:
         return {"file": str(self.recorder.path), "messages": self.recorder.count,
                 "skipped": self.skipped, "camera_frames_skipped": self.thinner.skipped,
-                "recordings_removed": self.removed}
+                "recordings_removed": self.removed, "without": self.without}
 
     def close(self) -> None:
         self._sub.close()
@@ -287,9 +319,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-file-bytes", type=byte_size, default=DEFAULT_MAX_FILE_BYTES,
                    help=f"a session goes on in a new file (-part2 ...) past this size "
                         f"(default {DEFAULT_MAX_FILE_BYTES / 1e6:g}M; 0: one file)")
+    p.add_argument("--audio", action=argparse.BooleanOptionalAction, default=None,
+                   help="--no-audio leaves the microphones' audio (voice/audio/*, the web page's) out "
+                        f"of the recordings (default: recorded, unless ${WITHOUT_ENV} names audio)")
+    p.add_argument("--pictures", action=argparse.BooleanOptionalAction, default=None,
+                   help="--no-pictures leaves the cameras' images (rb/*/camera/*/depth, rgb) out of "
+                        f"the recordings (default: recorded, unless ${WITHOUT_ENV} names pictures)")
+
+
+def leave_out(args) -> set[str]:
+    """What to leave out: --no-audio / --no-pictures, else $ASIBOT_RECORD_WITHOUT; `--audio`
+    records it whatever the variable says."""
+    left_out = without_from_env()
+    for what in LEFT_OUT:
+        flag = getattr(args, what, None)
+        if flag is True:
+            left_out.discard(what)
+        elif flag is False:
+            left_out.add(what)
+    return left_out
 
 
 def build(bus, args) -> RecorderService:
     return RecorderService(bus, Path(args.dir), args.label, args.exclude, camera_hz=args.camera_hz,
                            retention=Retention(args.max_bytes, args.max_age_days),
-                           max_file_bytes=args.max_file_bytes)
+                           max_file_bytes=args.max_file_bytes, without=leave_out(args))

@@ -18,7 +18,7 @@ import logging
 import threading
 from pathlib import Path
 
-from asibot.files import write_atomic
+from asibot.files import private_dir, write_atomic
 from asibot.voice.phones import check_phones
 
 log = logging.getLogger("asibot.voice")
@@ -74,7 +74,7 @@ class Pronunciations:
             return count
 
     def _write(self, learned: Learned) -> None:
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        private_dir(self.path.parent)
         text = {phrase: [" ".join(s) for s in sayings] for phrase, sayings in learned.items()}
         write_atomic(self.path, json.dumps(text, indent=1, ensure_ascii=False).encode())
 

@@ -34,7 +34,7 @@ import numpy as np
 
 from asibot.safety import estop
 from asibot import keys, messages, runtime, verbs
-from asibot.files import data_dir, write_atomic
+from asibot.files import data_dir, private_dir, write_atomic
 from asibot.bus import Bus
 from asibot.client import TasksClient
 from asibot.errors import RpcError, Unavailable
@@ -300,7 +300,7 @@ class VoiceService(runtime.Service):
         """`confirm`: ask "Shall I start ...? Say yes or no." before a task heard starts (the
         page's setting, kept in the user's data folder); absent: just read it."""
         if a.confirm is not None:
-            self.settings_file.parent.mkdir(parents=True, exist_ok=True)
+            private_dir(self.settings_file.parent)
             write_atomic(self.settings_file, json.dumps({"confirm": a.confirm}).encode())
             self.commands.confirm = a.confirm
         return {"confirm": self.commands.confirm}

@@ -176,6 +176,18 @@ def delete_program(name: str, request: Request) -> dict:
     return {}
 
 
+@router.get("/storage", summary="how much the program store keeps (programs, icons, versions, trash) of its limit, in bytes")
+def storage(request: Request) -> dict:
+    return web_of(request).data.usage().as_json()
+
+
+@router.delete("/trash", summary="empty the trash: deleted programs, their versions and steps, and deleted tasks go for good")
+def empty_trash(request: Request) -> dict:
+    data = web_of(request).data
+    emptied = data.empty_trash()
+    return {"emptied": emptied.items, "freed": emptied.bytes, "storage": data.usage().as_json()}
+
+
 @router.get("/client-reference",
             summary="the Program tab's Python reference: the clients' methods, signatures and docstrings (asibot.client)")
 def client_reference() -> dict:

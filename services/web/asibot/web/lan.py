@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from asibot.certificates import alt_names
-from asibot.files import write_atomic
+from asibot.files import private_dir, write_atomic
 
 COOKIE = "asibot_token"
 #: Paths a browser may load before it has the token (the page tells it how to get one).
@@ -51,7 +51,7 @@ def ensure_certificate(folder: Path, names: list[str]) -> tuple[Path, Path]:
     from cryptography.hazmat.primitives.asymmetric import ec
     from cryptography.x509.oid import NameOID
 
-    folder.mkdir(parents=True, exist_ok=True)
+    private_dir(folder)
     private = ec.generate_private_key(ec.SECP256R1())
     subject = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "ASIBOT Task Creator")])
     now = datetime.datetime.now(datetime.timezone.utc)
@@ -73,7 +73,7 @@ def ensure_token(folder: Path, renew: bool = False) -> tuple[str, bool]:
     path = folder / "token"
     if path.exists() and not renew:
         return path.read_text().strip(), False
-    folder.mkdir(parents=True, exist_ok=True)
+    private_dir(folder)
     token = secrets.token_urlsafe(18)
     write_atomic(path, token.encode())
     os.chmod(path, 0o600)

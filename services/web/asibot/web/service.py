@@ -19,6 +19,7 @@ import uvicorn
 
 from asibot import local_http, runtime
 from asibot.bus import Bus
+from asibot.files import private_dir
 from asibot.web import guard, lan as lan_access
 from asibot.web.app import Web, create_app, stop_quietly
 from asibot.web.cameras import Cameras
@@ -140,7 +141,7 @@ def build(bus: Bus, args: argparse.Namespace) -> WebService:
         raise ValueError(f"--port must be 1 to 65535, got {args.port}")
     root = args.data or default_root()
     try:
-        data = UserData(root)
+        data = UserData(private_dir(root))       # 0700, made or found (asibot.files)
     except OSError as exc:
         raise ValueError(f"cannot use {root} for the user's files ({exc.strerror}); "
                          "choose another folder with --data or ASIBOT_DATA") from None

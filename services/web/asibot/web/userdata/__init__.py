@@ -10,8 +10,12 @@ ASIBOT user's folder works as it is:
     <task>.task         3 lines: program (no .py), words (several joined by ";"), icon file name
     favourites.json     how often each task and place was used, and the carer's order of them
     icons/              uploaded icons (PNG, JPEG, GIF, WebP)
-    .versions/<prog>/   previous versions of each program, so a bad save can be undone
-    .trash/             deleted programs and tasks
+    .versions/<prog>/   previous versions of each program, so a bad save can be undone (a bounded
+                        history, as an editor keeps)
+    .trash/             deleted programs and tasks, purged after a time or past a size; it can be emptied
+
+Programs, steps, tasks, icons, versions and trash count against one cap together (folder.py
+says how much each part keeps and what a refusal says).
 
 One module a kind of file (points, words, programs, tasks, icons, and the seed's folder in and
 out: seed); `UserData` is the folder as the routes see it, and joins the kinds where one needs
@@ -33,19 +37,19 @@ from asibot.files import data_dir
 from asibot.web.userdata import seed
 from asibot.web.userdata.errors import AlreadyExists, NotFound, UserDataError
 from asibot.web.userdata.favourites import Favourites
-from asibot.web.userdata.folder import Folder
+from asibot.web.userdata.folder import VERSIONS_KEPT, Emptied, Folder, Usage
 from asibot.web.userdata.icons import MAX_ICON_BYTES, SHIPPED_ICONS, Icon, Icons, check_icon_name
 from asibot.web.userdata.names import MAX_NAME, quote
 from asibot.web.userdata.points import Point, Points, check_point_name, check_values
-from asibot.web.userdata.programs import (MAX_PROGRAM_BYTES, VERSIONS_KEPT, Problem, Programs, Version,
-                                          check_program, check_program_name, check_program_text)
+from asibot.web.userdata.programs import (MAX_PROGRAM_BYTES, Problem, Programs, Version, check_program,
+                                          check_program_name, check_program_text)
 from asibot.web.userdata.seed import SEED_ICONS, ImportReport, Skipped
 from asibot.web.userdata.steps import Made, ProgramSteps, Saved
 from asibot.web.userdata.tasks import Task, Tasks, check_task_name, check_task_words
 from asibot.web.userdata.words import MAX_WORD, Words, check_word
 
 __all__ = ["AlreadyExists", "NotFound", "UserDataError", "UserData", "default_root",
-           "Point", "Version", "Problem", "Task", "Icon", "Skipped", "ImportReport", "Made", "Saved",
+           "Point", "Version", "Problem", "Task", "Icon", "Skipped", "ImportReport", "Made", "Saved", "Usage", "Emptied",
            "check_point_name", "check_values", "check_program_name", "check_program_text", "check_program",
            "check_task_name", "check_icon_name", "check_word",
            "SHIPPED_ICONS", "SEED_ICONS", "MAX_NAME", "MAX_WORD", "MAX_PROGRAM_BYTES", "MAX_ICON_BYTES",
@@ -157,6 +161,17 @@ class UserData:
         self.program_files.delete(name, [t.name for t in self.task_files.all() if t.program == name])
         self.steps.delete(name)
 
+    @_locked
+    def usage(self) -> Usage:
+        """How much the program store keeps: programs, icons, versions and trash (reading it
+        changes nothing: the trash is purged at start and by writes)."""
+        return self.folder.usage()
+
+    @_locked
+    def empty_trash(self) -> Emptied:
+        """Remove the deleted programs, steps and tasks for good; what is live stays."""
+        return self.folder.empty_trash()
+
     def check_program(self, text: str) -> list[Problem]:
         """See the module function `check_program`."""
         return check_program(text)
@@ -207,6 +222,7 @@ class UserData:
 
     @_locked
     def delete_task(self, name: str) -> None:
+        """Move a task to the trash."""
         self.task_files.delete(name)
 
     # ------------------------------------------------------------------------------- icons

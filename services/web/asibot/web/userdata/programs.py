@@ -1,5 +1,6 @@
 """The user's programs: `<program>.py`, with the previous versions of each in .versions/<program>/,
-so a bad save can be undone, and deleted ones in .trash/."""
+so a bad save can be undone, and deleted ones in .trash/. How many versions are kept, how long
+the trash keeps what was deleted and how much all of it may take: folder.py."""
 
 from __future__ import annotations
 
@@ -7,11 +8,11 @@ import contextlib
 import os
 import re
 import threading
-import time
 import warnings
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+from typing import Sequence
 
 from asibot.files import fsync_dir, write_atomic
 from asibot.web.userdata.errors import AlreadyExists, NotFound, UserDataError
@@ -19,7 +20,6 @@ from asibot.web.userdata.folder import Folder, decode
 from asibot.web.userdata.names import MAX_NAME, plain_name, quote
 
 MAX_PROGRAM_BYTES = 256 * 1024
-VERSIONS_KEPT = 20
 
 PROGRAM_RE = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
 _COMPILE_LOCK = threading.Lock()
@@ -111,20 +111,24 @@ class Programs:
         write_atomic(path, text.encode())
         return text
 
-    def save(self, name: str, text: str) -> None:
+    def save(self, name: str, text: str, also_bytes: int = 0, also_versions: Sequence[tuple[str, int]] = ()) -> None:
         """Write a program (even one that does not compile yet: work in progress is kept);
-        the text it replaces is kept first as a version."""
+        the text it replaces is kept first as a version. Refused, nothing written, when the
+        folder has no room for it (folder.room_for); `also_bytes` and `also_versions` (suffix,
+        bytes) are what the caller writes with it (a program's steps), counted in the same check."""
         path = self.path(name)
-        text = check_program_text(text)
-        if path.is_file():
-            old = path.read_bytes()
-            if old == text.encode():
-                return
-            self.folder.room_for("program", len(text.encode()) - len(old), new=False)
-            self._keep_version(name, old)
-        else:
-            self.folder.room_for("program", len(text.encode()))
-        write_atomic(path, text.encode())
+        body = check_program_text(text).encode()
+        old = path.read_bytes() if path.is_file() else None
+        versions = [*also_versions, *([(".py", len(old))] if old is not None and old != body else [])]
+        grows = len(body) - len(old or b"") + also_bytes + self.folder.version_growth(name, versions)
+        if old == body:
+            if grows > 0:
+                self.folder.room_for("program", grows, new=False)
+            return
+        self.folder.room_for("program", grows, new=old is None)
+        if old is not None:
+            self.folder.keep_version(name, ".py", old)
+        write_atomic(path, body)
 
     def versions(self, name: str) -> list[Version]:
         """The kept previous versions of a program, newest first."""
@@ -179,6 +183,7 @@ class Programs:
         if (self.folder.versions_dir / name).is_dir():
             os.rename(self.folder.versions_dir / name, self.folder.trash_dir / f"{stamp}-{name}.versions")
         fsync_dir(self.folder.root)
+        self.folder.purge_trash()
 
     def file(self, name: str) -> Path:
         """The file of an existing program, for the runner (NotFound when there is none)."""
@@ -186,14 +191,3 @@ class Programs:
         if not path.is_file():
             raise NotFound(f"There is no program {quote(name)}; create it on the Program page first.")
         return path
-
-    def _keep_version(self, name: str, data: bytes) -> None:
-        folder = self.folder.versions_dir / name
-        folder.mkdir(parents=True, exist_ok=True)
-        stamp = time.time_ns()
-        while (folder / f"{stamp}.py").exists():  # two saves within one clock tick
-            stamp += 1
-        write_atomic(folder / f"{stamp}.py", data)
-        for old in sorted((p for p in folder.glob("*.py") if p.stem.isdigit()),
-                          key=lambda p: int(p.stem))[:-VERSIONS_KEPT]:
-            old.unlink()

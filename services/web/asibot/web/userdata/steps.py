@@ -3,7 +3,8 @@ with the SHA-256 of the Python they last generated, so whether the two still agr
 ("in sync"): a program edited as Python afterwards no longer matches its steps, and the page
 says so and keeps both. Saving steps again writes the .py from them (once the person confirmed
 that it replaces the edited Python; the old .py is kept as a version, as every save keeps one).
-Previous steps are kept too, in .versions/<program>/<stamp>.steps.json, bounded like programs.
+Previous steps are kept too, in .versions/<program>/<stamp>.steps.json, bounded with the
+program's Python (folder.py), and counted with it against the folder's cap.
 
 The file: {"format": 1, "steps": [...], "python_sha256": "<hex>"}. The steps are the models of
 asibot.web.steps; the generator is there too.
@@ -15,7 +16,6 @@ import contextlib
 import hashlib
 import json
 import os
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -26,7 +26,7 @@ from asibot.web.userdata.errors import AlreadyExists, NotFound, UserDataError
 from asibot.web.userdata.folder import Folder, decode
 from asibot.web.userdata.names import quote
 from asibot.web.userdata.points import Points
-from asibot.web.userdata.programs import VERSIONS_KEPT, Programs, check_program_name
+from asibot.web.userdata.programs import Programs, check_program_name
 
 FORMAT = 1
 SUFFIX = ".steps.json"
@@ -117,9 +117,15 @@ class ProgramSteps:
                                         "steps replaces that Python (kept as a previous version). Confirm to go on.")
             body = json.dumps({"format": FORMAT, "steps": steplib.dump(steps), "python_sha256": digest(text)},
                               indent=1, ensure_ascii=False).encode() + b"\n"
-            self.programs.save(name, text)      # the version it replaces is kept
-            self._keep_version(name)
-            write_atomic(self.path(name), body)
+            path = self.path(name)
+            old = path.read_bytes() if path.is_file() else None
+            # the versions they replace are kept; the folder's room is checked for all of it at once
+            self.programs.save(name, text, also_bytes=len(body) - len(old or b""),
+                               also_versions=[(SUFFIX, len(old))] if old is not None and old != body else [])
+            if old is not None and old != body:
+                self.folder.keep_version(name, SUFFIX, old)
+            if old != body:
+                write_atomic(path, body)
             return Made(list(steps), text)
 
     def rename(self, old: str, new: str) -> None:
@@ -139,6 +145,7 @@ class ProgramSteps:
             if src.is_file():
                 os.rename(src, self.folder.trash_dir / f"{self.folder.trash_stamp()}-{name}{SUFFIX}")
                 fsync_dir(self.folder.root)
+                self.folder.purge_trash()
 
     def _load(self, name: str) -> dict | None:
         path = self.path(name)
@@ -152,18 +159,3 @@ class ProgramSteps:
         if not isinstance(data, dict) or data.get("format") != FORMAT:
             raise UserDataError(f"The steps file of {quote(name)} is not one this page reads (format {FORMAT}).")
         return data
-
-    def _keep_version(self, name: str) -> None:
-        path = self.path(name)
-        if not path.is_file():
-            return
-        folder = self.folder.versions_dir / name
-        folder.mkdir(parents=True, exist_ok=True)
-        stamp = time.time_ns()
-        while (folder / f"{stamp}{SUFFIX}").exists():
-            stamp += 1
-        write_atomic(folder / f"{stamp}{SUFFIX}", path.read_bytes())
-        kept = sorted((p for p in folder.glob(f"*{SUFFIX}") if p.name[:-len(SUFFIX)].isdigit()),
-                      key=lambda p: int(p.name[:-len(SUFFIX)]))
-        for old in kept[:-VERSIONS_KEPT]:
-            old.unlink()

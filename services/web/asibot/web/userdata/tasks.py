@@ -88,8 +88,12 @@ class Tasks:
         return parse_task(path.stem, decode(path.read_bytes())[0])
 
     def write(self, path: Path, program: str, words: list[str], icon: str) -> Task:
-        """Write the task at `path` (`path(name)`: its name checked) as it is given."""
-        write_atomic(path, task_text(program, words, icon))
+        """Write the task at `path` (`path(name)`: its name checked) as it is given, if the
+        folder has room for it."""
+        body = task_text(program, words, icon)
+        old = path.stat().st_size if path.is_file() else None
+        self.folder.room_for("task", len(body) - (old or 0), new=old is None)
+        write_atomic(path, body)
         return Task(path.stem, program, words, icon)
 
     def follow_program(self, old: str, new: str) -> None:
@@ -105,3 +109,4 @@ class Tasks:
             raise NotFound(f"There is no task named {quote(name)}.")
         os.rename(path, self.folder.trash_dir / f"{self.folder.trash_stamp()}-{path.name}")
         fsync_dir(self.folder.root)
+        self.folder.purge_trash()

@@ -77,6 +77,8 @@ export const paths = {
   renameProgram: (name) => at('programs', name, 'rename'),
   runProgram: (name) => at('programs', name, 'run'),
   restoreVersion: (name, version) => at('programs', name, 'versions', version, 'restore'),
+  storage: at('storage'),
+  trash: at('trash'),
   programSteps: {
     steps: (name) => at('programs', name, 'steps'),
     preview: (name) => at('programs', name, 'steps', 'preview'),

@@ -6,6 +6,8 @@
 // (the traceback under Details); beside the editor, the clients' reference (pyhelp.js).
 // Unsaved text is a draft, kept per program in this browser until it is saved or discarded: a
 // tab switch, another program opened or a reload loses nothing.
+// Below the list of programs: how much the programs keep of their limit (versions and trash
+// included) and a control that empties the trash.
 // Beside the Python editor, the steps editor (steps.js): a "Steps" / "Python" switch shows one or
 // the other; a program made of steps opens in Steps, and one can be made straight from the
 // "Pick it up" or "Put it down" template, or with no steps yet.
@@ -40,6 +42,9 @@ const drafts = {
 };
 
 const clock = (seconds) => new Date(seconds * 1000).toLocaleTimeString();
+// Bytes as the server's sentences say them: 512 bytes, 12 KiB, 31.8 MiB.
+const size = (n) => (n < 1024 ? `${n} bytes` : n < 1048576 ? `${Math.round(n / 1024)} KiB`
+  : `${(n / 1048576).toFixed(1).replace(/\.0$/, '')} MiB`);
 
 // A Python name for a point: "point-1" -> "point_1".
 function variable(name) {
@@ -123,6 +128,19 @@ export function stopProgramButton() {
 export default {
   mount(root) {
     const list = el('div', { class: 'chips', role: 'group', 'aria-label': 'Programs' });
+    // How much the folder keeps (GET /api/storage), and the trash emptied (DELETE /api/trash).
+    const storage = el('p', { class: 'muted storage', role: 'status' });
+    const showStorage = (s) => {
+      const items = s.trash_items === 1 ? '1 deleted item' : `${s.trash_items} deleted items`;
+      storage.textContent = `Your programs use ${size(s.used)} of ${size(s.limit)} (versions ${size(s.versions)}, `
+        + `trash ${size(s.trash)}: ${items}).`;
+      emptyTrash.disabled = !s.trash_items;
+    };
+    const emptyTrash = confirmable('Empty the trash', {}, () => attempt(async () => {
+      const r = await api.del(paths.trash);
+      showStorage(r.storage);
+      return r;
+    }, (r) => `Trash emptied: ${size(r.freed)} freed.`), { ask: 'Sure? Deleted programs go for good: touch again' });
     const newName = kept('program.new', el('input', { type: 'text', 'aria-label': 'New program name', placeholder: 'give_me_the_can' }));
     const title = el('h2', {}, 'No program open');
     const draftState = el('p', { class: 'draft-state', role: 'status' });
@@ -214,6 +232,7 @@ export default {
         markChip(b);
         return b;
       }) : [el('span', { class: 'muted' }, 'No programs yet: type a name and touch New program.')]));
+      showStorage(await api.get(paths.storage));
     };
     // Open `name`: its draft if it has one, else the saved text.
     const open = (name) => attempt(async () => {
@@ -312,7 +331,7 @@ export default {
       versions.replaceChildren();
       showDraftState();
       await refreshList();
-    }, 'Program deleted (kept in the trash of the data folder).');
+    }, 'Program deleted (kept in the trash: Empty the trash, below the programs, removes it for good).');
     // `snippet` (whole lines) at the cursor: before its line when it is at the line's start, else after it.
     const insertLines = (snippet) => {
       const at = editor.state.selection.main.head;
@@ -361,7 +380,8 @@ export default {
             el('button', { type: 'button', onclick: () => createFromSteps('empty') }, 'New from steps'),
             el('button', { type: 'button', onclick: () => pointChooser(fromSteps, 'Pick it up at which point?', (p) => createFromSteps('pick_it_up', p)) }, 'New: Pick it up…'),
             el('button', { type: 'button', onclick: () => pointChooser(fromSteps, 'Put it down at which point?', (p) => createFromSteps('put_it_down', p)) }, 'New: Put it down…')),
-          fromSteps),
+          fromSteps,
+          el('div', { class: 'row' }, storage, emptyTrash)),
         el('section', { class: 'panel', 'aria-label': 'Run' },
           el('h2', {}, 'Run'),
           el('div', { class: 'row' }, el('button', { type: 'button', class: 'primary big', onclick: run }, 'Run'), stopProgramButton(),
