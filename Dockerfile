@@ -54,9 +54,10 @@ RUN apt-get update \
         python3 libosmesa6 libgl1 libglib2.0-0 libgomp1 espeak-ng libportaudio2 bubblewrap libopenni2-0 \
  && apt-get clean && rm -rf /var/lib/apt/lists/* /var/cache/apt/archives/*.deb \
  && useradd --create-home --uid 1000 --shell /usr/sbin/nologin asibot \
- && mkdir -p /app/recordings /data \
- && chown asibot:asibot /app/recordings /data \
- && chmod 0700 /app/recordings /data
+ && mkdir -p /app/recordings /data /run/asibot-router \
+ && chown asibot:asibot /app/recordings /data /run/asibot-router \
+ && chmod 0700 /app/recordings /data \
+ && chmod 0711 /run/asibot-router
 ENV PATH=/opt/asibot/bin:$PATH \
     PYTHONUNBUFFERED=1 \
     MUJOCO_GL=osmesa \

@@ -33,6 +33,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import secrets
+import tempfile
 from pathlib import Path
 from typing import Callable
 
@@ -128,25 +129,67 @@ def username(role: str) -> str:
     return ANONYMOUS[0] if role == "reader" else role
 
 
-def access_control() -> dict:
+#: The links of the machine's own services and of other machines (the router listens on these);
+#: a program's session comes through PROGRAM_LINK, and has the program role's rights only.
+SERVICE_LINKS = ("tcp", "tls")
+PROGRAM_LINK = "unixsock-stream"
+#: Where a router listens for programs (`unixsock-stream/<path>`): set by compose and `asibot
+#: up`; else `program_endpoint` derives it from the router's own endpoint.
+PROGRAM_ROUTER_ENV = "ASIBOT_PROGRAM_ROUTER"
+
+
+def access_control(logins: bool = True) -> dict:
     """Zenoh's `access_control` section: a denying default, then each role's allow list.
 
+    Every session that comes through the programs' socket (`PROGRAM_LINK`) has the program
+    role's rights, whatever login it gives, on an open router too (issue 51: a program took
+    the base from nav and released the page's estop). With `logins`, each other session has
+    its login's role; without, an open router, every other session may do everything.
     What the router sends out (egress) is never filtered: what a session may not ask for,
     it is never sent.
     """
     rules: list[dict] = [{"id": "receive", "messages": _EVERY_MESSAGE, "flows": ["egress"],
                           "permission": "allow", "key_exprs": [keys.EVERYTHING]}]
-    subjects, policies = [], []
-    for role, grants in _GRANTS.items():
+    subjects: list[dict] = []
+    policies: list[dict] = []
+
+    def grant(name: str, grants: list, subject: dict) -> None:
         ids = []
         for i, (messages, key_exprs) in enumerate(grants):
-            ids.append(f"{role}-{i}")
+            ids.append(f"{name}-{i}")
             rules.append({"id": ids[-1], "messages": list(messages), "flows": ["ingress"],
                           "permission": "allow", "key_exprs": sorted(set(key_exprs))})
-        subjects.append({"id": role, "usernames": [username(role)]})
-        policies.append({"id": role, "rules": ["receive", *ids], "subjects": [role]})
+        subjects.append({"id": name, **subject})
+        policies.append({"id": name, "rules": ["receive", *ids], "subjects": [name]})
+
+    if logins:
+        for role, grants in _GRANTS.items():
+            grant(role, grants, {"usernames": [username(role)], "link_protocols": list(SERVICE_LINKS)})
+    else:
+        grant("open", [(_EVERY_MESSAGE, [keys.EVERYTHING])], {"link_protocols": list(SERVICE_LINKS)})
+    grant("programs-socket", _GRANTS["program"], {"link_protocols": [PROGRAM_LINK]})
     return {"enabled": True, "default_permission": "deny", "rules": rules,
             "subjects": subjects, "policies": policies}
+
+
+def program_endpoint(router: str) -> str:
+    """Where the router on `router` listens for programs: $ASIBOT_PROGRAM_ROUTER, else a
+    socket named after the router's port in this user's runtime folder."""
+    explicit = os.environ.get(PROGRAM_ROUTER_ENV, "")
+    if explicit:
+        return explicit
+    first = router.split(",")[0]
+    port = first.rsplit(":", 1)[-1] if ":" in first else "router"
+    return f"{PROGRAM_LINK}/{Path(tempfile.gettempdir()) / f'asibot-{os.getuid()}' / f'programs-{port}.sock'}"
+
+
+def program_socket(endpoint: str) -> Path:
+    """The socket file of a programs endpoint (`unixsock-stream/<path>`)."""
+    prefix = PROGRAM_LINK + "/"
+    if not endpoint.startswith(prefix):
+        raise ValueError(f"{endpoint!r}: the programs' endpoint is {prefix}<path of a socket>, "
+                         f"set in ${PROGRAM_ROUTER_ENV}")
+    return Path(endpoint[len(prefix):])
 
 
 # ---------------------------------------------------------------- credentials

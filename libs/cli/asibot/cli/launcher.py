@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import IO, Callable
 
 from asibot import keys, messages
-from asibot.access import ACCESS_ENV, ROLE_ENV
+from asibot.access import ACCESS_ENV, PROGRAM_ROUTER_ENV, ROLE_ENV, program_endpoint
 from asibot.bus import Bus
 from asibot.cli.compose import ServiceSpec
 from asibot.errors import AsibotError
@@ -58,6 +58,9 @@ def local_environment(spec: ServiceSpec, endpoint: str, access: Path | None = No
     # In containers the router is `tcp/router:7447`; here it is the loopback endpoint.
     env["ASIBOT_ROUTER"] = endpoint
     env["ASIBOT_ROUTER_LISTEN"] = listen or endpoint
+    # In containers a volume the router and the web share; here this user's runtime folder.
+    env.pop(PROGRAM_ROUTER_ENV, None)
+    env[PROGRAM_ROUTER_ENV] = program_endpoint(endpoint)
     env["ASIBOT_WEB_HOST"] = "127.0.0.1"   # a container listens on all its interfaces; here loopback only
     env["PYTHONUNBUFFERED"] = "1"
     # A role set in the launcher's shell would give every service the same one.

@@ -14,6 +14,7 @@ import functools
 import json
 import logging
 import os
+import socket
 import threading
 import time
 from pathlib import Path
@@ -72,16 +73,19 @@ def trusted_ca() -> Path:
     return path
 
 
-def router_config(endpoint: str, credentials: Path | str | None = None) -> zenoh.Config:
-    """A router on `endpoint`; with a credentials folder (asibot.access) it admits only the
-    logins of its dictionary and applies the roles' access control."""
+def router_config(endpoint: str, credentials: Path | str | None = None,
+                  programs: str | None = None) -> zenoh.Config:
+    """A router on `endpoint`, and for user programs on `programs` (a socket: by default
+    asibot.access.program_endpoint), where a session has the program role's rights only; with
+    a credentials folder (asibot.access) it admits only the logins of its dictionary and
+    applies the roles' access control, else every other session may do everything."""
     cfg = _base_config("router")
     endpoints = listen_endpoints(endpoint)
-    cfg.insert_json5("listen/endpoints", json.dumps(endpoints))
+    cfg.insert_json5("listen/endpoints", json.dumps(endpoints + [programs or access.program_endpoint(endpoint)]))
+    cfg.insert_json5("access_control", json.dumps(access.access_control(logins=credentials is not None)))
     if credentials is not None:
         dictionary = access.router_dictionary(credentials)
         cfg.insert_json5("transport/auth/usrpwd", json.dumps({"dictionary_file": str(dictionary)}))
-        cfg.insert_json5("access_control", json.dumps(access.access_control()))
     if any(e.startswith(TLS) for e in endpoints):
         if credentials is None:
             raise ValueError(f"{endpoint}: a tls/ endpoint is for a router with access control; give it "
@@ -297,7 +301,7 @@ def run_router(endpoint: str | None = None, stop: threading.Event | None = None,
                credentials: Path | str | None = None) -> None:
     """Run a Zenoh router in this process until `stop` is set (or forever)."""
     ep = router_endpoint(endpoint)
-    session = zenoh.open(router_config(ep, credentials))
+    session = open_router(ep, credentials)
     log.info("router listening on %s%s", ep, " with access control" if credentials else "")
     try:
         (stop or threading.Event()).wait()
@@ -305,7 +309,28 @@ def run_router(endpoint: str | None = None, stop: threading.Event | None = None,
         session.close()
 
 
-def open_router(endpoint: str, credentials: Path | str | None = None) -> zenoh.Session:
+def _listened(sock: Path) -> bool:
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as probe:
+        try:
+            probe.connect(str(sock))
+        except OSError:
+            return False
+    return True
+
+
+def open_router(endpoint: str, credentials: Path | str | None = None,
+                programs: str | None = None) -> zenoh.Session:
     """Open (and return) an in-process router session, for tests and `asibot up`; with a
-    credentials folder (asibot.access), only its logins get in, each with its role's rights."""
-    return zenoh.open(router_config(endpoint, credentials))
+    credentials folder (asibot.access), only its logins get in, each with its role's rights.
+    Programs come in through the socket of `programs` (router_config), which is made here:
+    its folder private to this user but for entering it, the socket open to `nobody` (the
+    user a root server runs programs as), since whoever comes in there has a program's rights."""
+    programs = programs or access.program_endpoint(endpoint)
+    sock = access.program_socket(programs)
+    sock.parent.mkdir(parents=True, exist_ok=True)
+    os.chmod(sock.parent, 0o711)
+    if sock.exists() and not _listened(sock):
+        sock.unlink()     # left by a router that ended without removing it
+    session = zenoh.open(router_config(endpoint, credentials, programs))
+    os.chmod(sock, 0o666)
+    return session

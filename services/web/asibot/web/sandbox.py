@@ -16,13 +16,14 @@ CA's key), so a program must get only what a program needs:
   tmpfs as `/tmp` (its scratch folder, also `$HOME`), gives it its own folder read-only
   (for `nobody`, a copy of its visible files: never `.lan`, with the page's token), and runs
   the program as `nobody` (root's server) or as the server's own user in a user namespace.
-- **No listening sockets, and the bus as the only peer**: a Landlock ruleset (Linux >= 6.7)
-  refuses every TCP bind and every TCP connect but to the router's port, and (Linux >= 6.12)
-  signals and abstract unix sockets out of the sandbox.
+- **No listening sockets, and the bus as the only peer, with a program's rights**: the bus is
+  the router's programs socket (ROUTER_INSIDE), where every session has the `program` role's
+  rights whatever the router's profile (asibot.access); bubblewrap gives the program a network
+  of its own, and a Landlock ruleset (Linux >= 6.7) refuses every TCP bind and connect, and
+  (Linux >= 6.12) signals and abstract unix sockets out of the sandbox.
 - **Its own bus identity**: an environment built from an allow list, never the server's
   (no ASIBOT_ACCESS, no secrets), and under access control a folder holding only
-  `program.credentials` (the `program` role of asibot.access: calls kinematics and nav,
-  reads states, publishes no command, never touches the estop).
+  `program.credentials`.
 
 Each wall is used when the machine has it and said in one log line when it has not
 (`Sandbox.describe()`); docs/sandbox.md has what each kind of deployment gets. Without
@@ -51,11 +52,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from asibot.access import PROGRAM_LINK, PROGRAM_ROUTER_ENV, program_endpoint, program_socket
+from asibot.bus import router_endpoint
+
 log = logging.getLogger(__name__)
 
 NOBODY = 65534
 #: Where the program's own credentials appear inside the sandbox.
 ACCESS_INSIDE = "/run/asibot/access"
+#: Where the router's programs socket (asibot.access.program_endpoint) appears inside it: the
+#: program's only way to the bus, with the program role's rights on every profile.
+ROUTER_INSIDE = "/run/asibot/router.sock"
 #: The server's environment variables a program may see (values copied when set); the rest,
 #: ASIBOT_ACCESS and ASIBOT_ROLE among them, it never gets.
 ENV_ALLOWED = ("LANG", "LC_ALL", "LC_CTYPE", "TZ", "MUJOCO_GL", "ASIBOT_ROUTER")
@@ -419,15 +426,15 @@ def _write(path: Path, value: int, missing_ok: bool = False) -> None:
 
 # ------------------------------------------------------------------------- Landlock
 
-def landlock_rules(abi: int, router_port: int | None) -> tuple[bytes, list[bytes], int] | None:
-    """The ruleset attribute and port rules for `landlock_apply`, built in the parent."""
+def landlock_rules(abi: int) -> tuple[bytes, list[bytes], int] | None:
+    """The ruleset attribute (and port rules: none) for `landlock_apply`, built in the parent:
+    every TCP bind and connect refused, since the bus is the router's programs socket."""
     if abi < 4:
         return None
     scoped = (_LL_SCOPE_ABSTRACT_UNIX | _LL_SCOPE_SIGNAL) if abi >= 6 else 0
     net = _LL_BIND_TCP | _LL_CONNECT_TCP
     attr = struct.pack("QQQ", 0, net, scoped) if abi >= 6 else struct.pack("QQ", 0, net)
-    rules = [struct.pack("QQ", _LL_CONNECT_TCP, router_port)] if router_port else []
-    return attr, rules, abi
+    return attr, [], abi
 
 
 def landlock_apply(prepared: tuple[bytes, list[bytes], int]) -> None:
@@ -446,12 +453,6 @@ def landlock_apply(prepared: tuple[bytes, list[bytes], int]) -> None:
             raise OSError(ctypes.get_errno(), "landlock_restrict_self")
     finally:
         os.close(fd)
-
-
-def router_port(endpoint: str | None) -> int | None:
-    """The TCP port of `tcp/HOST:PORT` (or tls/), the only one a program may connect to."""
-    m = re.match(r"^(?:tcp|tls)/.*:(\d+)$", endpoint or "")
-    return int(m[1]) if m else None
 
 
 # ------------------------------------------------------------------------- the supervisor
@@ -627,14 +628,29 @@ class Sandbox:
     """How programs run on this machine: `prepare()` one run; `describe()` says what they get."""
 
     def __init__(self, *, bwrap: bool = True, cgroups: bool = True, landlock: bool = True,
-                 access: Path | str | None = None, hide: tuple[Path, ...] = ()) -> None:
+                 access: Path | str | None = None, hide: tuple[Path, ...] = (),
+                 programs: str | None = None) -> None:
         """`access`: the server's access folder (default: $ASIBOT_ACCESS when set), whose
-        `program.credentials` alone a program gets; `hide`: more folders it must not see."""
+        `program.credentials` alone a program gets; `hide`: more folders it must not see;
+        `programs`: where the router listens for programs (default: asibot.access.program_endpoint
+        of this server's router), the program's only way to the bus."""
         self.features = probe(bwrap, cgroups, landlock)
         env_access = os.environ.get("ASIBOT_ACCESS")
         self.access = Path(access) if access else (Path(env_access) if env_access else None)
         self.hide = tuple(Path(h) for h in hide)
+        self.programs = programs
         self._reported = False
+
+    def router_socket(self, server_env: dict[str, str]) -> Path:
+        """The programs socket of the router the server passes on (`ASIBOT_ROUTER` in its `env`),
+        else of its own. Where no router listens (yet), a program still runs, and its bus says
+        that nothing answers there: it never gets another way to the bus."""
+        router = server_env.get("ASIBOT_ROUTER") or router_endpoint()
+        sock = program_socket(self.programs or program_endpoint(router))
+        if not sock.is_socket():
+            log.warning("the router does not listen for programs at %s: programs reach no bus until it "
+                        "does (restart `asibot up`, or set %s to where it listens)", sock, PROGRAM_ROUTER_ENV)
+        return sock
 
     def describe(self) -> str:
         return self.features.describe()
@@ -648,10 +664,14 @@ class Sandbox:
 
     # -- one run -------------------------------------------------------------------------
 
-    def environment(self, robot: str, server_env: dict[str, str], credentials: bool) -> dict[str, str]:
-        """The program's environment, from an allow list: never a copy of the server's."""
+    def environment(self, robot: str, server_env: dict[str, str], credentials: bool,
+                    router: Path | None = None) -> dict[str, str]:
+        """The program's environment, from an allow list: never a copy of the server's. Its
+        router is the programs socket (`router`, seen at ROUTER_INSIDE in bubblewrap)."""
         env = {k: os.environ[k] for k in ENV_ALLOWED if k in os.environ}
         env.update({k: v for k, v in server_env.items() if not ENV_SECRET.search(k)})
+        if router is not None:
+            env["ASIBOT_ROUTER"] = f"{PROGRAM_LINK}/{ROUTER_INSIDE if self.features.bwrap else router}"
         env.update({"PATH": "/usr/local/bin:/usr/bin:/bin", "HOME": "/tmp", "TMPDIR": "/tmp",
                     "PYTHONUNBUFFERED": "1", "PYTHONDONTWRITEBYTECODE": "1", "ASIBOT_ROBOT": robot})
         env.setdefault("LANG", "C.UTF-8")
@@ -711,9 +731,12 @@ class Sandbox:
         return sorted(p for p in paths if p.is_dir() and p != Path("/"))
 
     def _bwrap_argv(self, folder: Path, needed: list[Path], credentials: Path | None,
-                    scratch_bytes: int, folder_source: Path | None = None) -> list[str]:
+                    scratch_bytes: int, folder_source: Path | None = None,
+                    router: Path | None = None) -> list[str]:
         f = self.features
-        argv = [f.bwrap or "bwrap", "--unshare-pid", "--unshare-ipc", "--unshare-uts",
+        # A network of its own (only its own loopback): the router's programs socket, bound
+        # in below, is its one way out, on any kernel (Landlock's network rules need 6.7).
+        argv = [f.bwrap or "bwrap", "--unshare-pid", "--unshare-ipc", "--unshare-uts", "--unshare-net",
                 "--unshare-cgroup-try", "--die-with-parent", "--new-session"]
         if not f.as_nobody:
             argv += ["--unshare-user"] + (["--disable-userns"] if _bwrap_has(argv[0], "--disable-userns") else [])
@@ -739,11 +762,16 @@ class Sandbox:
             argv += (["--tmpfs", str(p)] if p.is_dir() and not p.is_symlink() else ["--ro-bind", "/dev/null", str(p)])
         if credentials is not None:
             argv += ["--ro-bind", str(credentials), ACCESS_INSIDE]
+        if router is not None and not router.is_socket():
+            router = None    # no router listens there yet: the program's bus finds nothing
+        if router is not None:
+            argv += ["--bind", str(router), ROUTER_INSIDE]
         # bubblewrap makes the folders above a bind in a tmpfs with the modes of the real ones
         # (/tmp/pytest-of-root, /root: 0700), which nobody could not enter.
         tmpfs.append("/tmp")
         made: list[str] = []
-        for dest in [*needed, folder, *([Path(ACCESS_INSIDE)] if credentials else [])]:
+        for dest in [*needed, folder, *([Path(ACCESS_INSIDE)] if credentials else []),
+                     *([Path(ROUTER_INSIDE)] if router else [])]:
             for parent in reversed(dest.parents):
                 if any(parent.is_relative_to(t) and str(parent) != t for t in tmpfs) and parent != dest \
                         and str(parent) not in made:
@@ -762,6 +790,7 @@ class Sandbox:
                 rlimits: Callable[[], None]) -> Prepared:
         """Everything for Popen to start `python -u path robot` in the sandbox, cwd its folder."""
         self.report()
+        router = self.router_socket(server_env)
         f = self.features
         folder = path.parent
         # Without bubblewrap, root's server still runs the program as nobody when nobody can
@@ -783,15 +812,16 @@ class Sandbox:
         if drop and made is not None and folder_source is not None:
             os.chmod(made, 0o755)
             cwd, path = folder_source, folder_source / path.name
-        env = self.environment(robot, server_env, credentials is not None)
-        rules = landlock_rules(f.landlock, router_port(env.get("ASIBOT_ROUTER")))
+        env = self.environment(robot, server_env, credentials is not None, router)
+        rules = landlock_rules(f.landlock)
         program = [python, "-u", str(path), robot]
         info_r = info_w = None
         supervised = False
         if f.bwrap:
             info_r, info_w = os.pipe()
             os.set_inheritable(info_w, True)
-            argv = self._bwrap_argv(folder, self._needed(python), credentials, scratch_bytes, folder_source)
+            argv = self._bwrap_argv(folder, self._needed(python), credentials, scratch_bytes, folder_source,
+                                    router)
             argv[1:1] = ["--info-fd", str(info_w)]
             argv += program
             landlock_in_child = rules
