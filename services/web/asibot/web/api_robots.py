@@ -17,7 +17,7 @@ from pydantic import Field, StrictBool, StrictInt
 from asibot import robots
 from asibot.errors import RpcError
 from asibot.web.cameras import BOUNDARY, mjpeg
-from asibot.web.models import Level, Number, RobotId, Strict
+from asibot.web.models import Direction, Level, Number, RobotId, Strict
 from asibot.web.routing import known, off_loop, web_of
 
 router = APIRouter(prefix="/api")
@@ -27,7 +27,7 @@ class Step(Strict):
     """One jog step: a joint (0 for the first) or a point axis (0-4: x, y, z, rot(y'), rot(z''))."""
     space: Literal["joint", "cartesian"]
     axis: StrictInt
-    direction: Literal[-1, 1]
+    direction: Direction
     level: Level = 3
     step: Annotated[Number, Field(gt=0, le=90)] | None = Field(
         None, description="step size in m (x, y, z) or deg; default the seed's 5 deg / 0.10 m / 15 deg")

@@ -11,7 +11,7 @@ they are: this is the one check of what a page sends.
 from __future__ import annotations
 
 import json
-from typing import Annotated, Any, Callable, Collection, Literal, TypeGuard
+from typing import Annotated, Any, Callable, Collection, Literal
 
 from pydantic import (BaseModel, ConfigDict, Field, InstanceOf, TypeAdapter, ValidationError, ValidationInfo,
                       field_validator, model_validator)
@@ -21,6 +21,7 @@ from asibot import robots
 from asibot.errors import CODES, RpcError
 from asibot.jog import speed_fraction
 from asibot.poses import POINT_AXES
+from asibot.web.models import DIRECTION_RULE, Direction, is_direction, whole
 from asibot.web.pointer import DeviceReading
 from asibot.web.voice_relay import MicError, check_rate
 
@@ -54,11 +55,6 @@ def _refuse(code: str, sentence: str) -> PydanticCustomError:
     return PydanticCustomError(code, "{sentence}", {"sentence": sentence})
 
 
-def whole(value: object) -> TypeGuard[int]:
-    """An int that is not a bool (JSON's `true` is not the number 1 here)."""
-    return isinstance(value, int) and not isinstance(value, bool)
-
-
 def check_level(level: int) -> int:
     """A speed level, 1 (slowest) to 5, else a bad_request with the jog's own sentence."""
     try:
@@ -69,9 +65,10 @@ def check_level(level: int) -> int:
 
 
 def check_direction(direction: int) -> int:
-    """-1 or 1, else a bad_request with the sentence the page shows."""
-    if not whole(direction) or direction not in (-1, 1):
-        raise RpcError("bad_request", f"The direction must be -1 or 1; got {direction!r}.")
+    """-1 or 1, as the REST step's `Direction` checks it (models.is_direction: not `true`), else a
+    bad_request with the sentence the page shows."""
+    if not is_direction(direction):
+        raise RpcError("bad_request", f"{DIRECTION_RULE}; got {direction!r}.")
     return direction
 
 
@@ -123,7 +120,7 @@ class Hold(_ToRobot):
     type: Literal["hold"]
     space: Literal["joint", "cartesian"] = Field(None, validate_default=True)
     axis: int = Field(None, validate_default=True)
-    direction: Literal[-1, 1] = Field(None, validate_default=True)
+    direction: Direction = Field(None, validate_default=True)
     level: int = Field(None, validate_default=True)
 
     @field_validator("space", mode="before")
