@@ -48,7 +48,7 @@ def test_every_route_that_changes_something_is_listed(web):
     listed = routes(svc)
     for expected in [("POST", "/api/estop"), ("POST", f"/api/robots/{API_ROBOT}/release"), ("POST", "/api/import"),
                      ("POST", "/api/icons"), ("POST", "/api/run/stop"), ("POST", f"/api/base/{API_ROBOT}/cancel"),
-                     ("POST", "/api/programs/x/versions/x/restore"), ("PUT", "/api/voice")]:
+                     ("POST", "/api/programs/x/versions/x/restore"), ("PUT", "/api/voice"), ("DELETE", "/api/trash")]:
         assert expected in listed
     assert len(listed) >= 35
 

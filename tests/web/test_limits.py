@@ -234,10 +234,10 @@ def test_the_program_tab_shows_what_is_kept_and_empties_the_trash(web):
     client.put("/api/programs/to_trash", json={"text": "print('a version')\n"})
     assert client.delete("/api/programs/to_trash").status_code == 200
     kept = client.get("/api/storage").json()
-    assert kept["limit"] == user_folder.MAX_STORED_BYTES and kept["trash_items"] == 2    # the program, its versions
+    assert kept["limit"] == user_folder.MAX_STORED_BYTES and kept["trash_items"] == 1    # the program (its versions go with it)
     assert kept["trash"] > 0 and kept["used"] == kept["programs"] + kept["icons"] + kept["versions"] + kept["trash"]
     emptied = client.delete("/api/trash").json()
-    assert emptied["emptied"] == 2 and emptied["freed"] == kept["trash"]
+    assert emptied["emptied"] == 1 and emptied["freed"] == kept["trash"]
     assert emptied["storage"]["trash"] == 0 and emptied["storage"]["trash_items"] == 0
     assert not list((svc.web.data.root / ".trash").iterdir())
 

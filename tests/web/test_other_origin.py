@@ -118,7 +118,8 @@ def test_a_page_on_another_origin_can_do_nothing(kitchen, attacker):
     for route in (["POST", f"/api/robots/{ROBOT}/cameras/evil/touch"], ["POST", f"/api/robots/{ROBOT}/cameras/evil/calibration/marks"],
                   ["POST", f"/api/robots/{ROBOT}/cameras/evil/calibration/spot"],
                   ["POST", f"/api/robots/{ROBOT}/cameras/evil/calibration/solve"], ["DELETE", f"/api/robots/{ROBOT}/cameras/evil/calibration"],
-                  ["POST", "/api/points"], ["PUT", "/api/favourites/order"], ["POST", "/api/release"]):
+                  ["POST", "/api/points"], ["PUT", "/api/favourites/order"], ["POST", "/api/release"],
+                  ["DELETE", "/api/trash"]):
         assert route in routes, route
     assert all(r in routes for r in STEPS_ROUTES), routes
     before = joints(kitchen)

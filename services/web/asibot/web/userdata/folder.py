@@ -179,7 +179,8 @@ class Folder:
         trash = list(self.trash_dir.iterdir()) if self.trash_dir.is_dir() else []
         return Usage(programs=sum(_files(self.root, LIVE_SUFFIXES)), icons=sum(_files(self.icons_dir)),
                      versions=tree_bytes(self.versions_dir), trash=sum(tree_bytes(p) for p in trash),
-                     trash_items=len(trash))
+                     # a deleted program's versions go with it: one item, as the user deleted it
+                     trash_items=sum(not p.name.endswith(".versions") for p in trash))
 
     def room_for(self, kind: str, grows: int, new: bool = True) -> None:
         """Refuse, with a sentence, a file that would take the folder past its limits: `grows`
@@ -307,4 +308,4 @@ class Folder:
             size = tree_bytes(path)
             remove_tree(path)
             freed += size
-        return Emptied(len(entries), freed)
+        return Emptied(sum(not path.name.endswith(".versions") for _, path in entries), freed)

@@ -381,7 +381,7 @@ export default {
             el('button', { type: 'button', onclick: () => pointChooser(fromSteps, 'Pick it up at which point?', (p) => createFromSteps('pick_it_up', p)) }, 'New: Pick it up…'),
             el('button', { type: 'button', onclick: () => pointChooser(fromSteps, 'Put it down at which point?', (p) => createFromSteps('put_it_down', p)) }, 'New: Put it down…')),
           fromSteps,
-          el('div', { class: 'row' }, storage, emptyTrash)),
+          el('div', { class: 'row storage-row' }, storage, emptyTrash)),
         el('section', { class: 'panel', 'aria-label': 'Run' },
           el('h2', {}, 'Run'),
           el('div', { class: 'row' }, el('button', { type: 'button', class: 'primary big', onclick: run }, 'Run'), stopProgramButton(),
