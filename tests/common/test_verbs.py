@@ -82,9 +82,10 @@ def _tables() -> dict[str, dict[str, Verb]]:
     from asibot.safety.driver_contract import VERBS as DRIVER
     from asibot.sim.service import VERBS as SIM
     from asibot.voice.service import VERBS as VOICE
+    from asibot.web.look_bus import VERBS as LOOK
     from asibot.web.tasks_bus import VERBS as TASKS
     return {"kinematics": kinematics_verbs(6), "nav": NAV, "perception": PERCEPTION, "driver": DRIVER,
-            "sim": SIM, "voice": VOICE, "tasks": TASKS, "arm_driver": arm_driver_verbs(("q1", "q2"))}
+            "sim": SIM, "voice": VOICE, "tasks": TASKS, "look": LOOK, "arm_driver": arm_driver_verbs(("q1", "q2"))}
 
 
 def test_every_table_names_the_verbs_of_the_key_catalogue():
@@ -93,6 +94,7 @@ def test_every_table_names_the_verbs_of_the_key_catalogue():
     assert set(tables["nav"]) == set(keys.RPC_VERBS_NAV)
     assert set(tables["perception"]) == set(keys.RPC_VERBS_PERCEPTION)
     assert set(tables["tasks"]) == set(keys.RPC_VERBS_TASKS)
+    assert set(tables["look"]) == set(keys.RPC_VERBS_LOOK)
     assert set(tables["voice"]) == set(keys.RPC_VERBS_VOICE)
 
 

@@ -192,12 +192,42 @@ class Recorder:
         self.calls.append(("grip", close))
         if close and self.script.get("grip"):
             raise RpcError(self.script["grip"], "The gripper was still moving 4 s after the command.")
-        return self.script.get("holding", True) if close else False
+        holding = self.script.get("holding", True)
+        if close and isinstance(holding, list):      # one answer a close, in turn
+            return holding.pop(0)
+        return holding if close else False
+
+    def stat(self):
+        moves = [c for c in self.calls if c[0] in ("movj", "movl")]
+        return list(moves[-1][1]) if moves else [0.3, 0.0, 0.5, 180.0, 0.0]
 
 
-def run_generated(text: str, monkeypatch, script: dict) -> Recorder:
+class Looker:
+    """A LookClient that answers each find from a script: a place, or a refusal."""
+
+    def __init__(self, answers: list) -> None:
+        self.answers, self.calls = answers, []
+
+    def open(self, robot):
+        self.calls.append(("open", robot))
+
+    def close(self):
+        self.calls.append(("close",))
+
+    def find(self, thing):
+        self.calls.append(("find", thing["name"]))
+        answer = self.answers.pop(0)
+        if isinstance(answer, RpcError):
+            raise answer
+        reach = [answer[0], answer[1], 0.09, 180.0, 0.0]
+        return {"says": f"I see the {thing['name']}, 12 cm from where it was taught.", "reach": reach,
+                "above": [answer[0], answer[1], 0.21, 180.0, 0.0], "moved": 0.12, "seen": []}
+
+
+def run_generated(text: str, monkeypatch, script: dict, looks: list | None = None) -> Recorder:
     robot = Recorder(script)
     monkeypatch.setattr(asibot.client, "CartesianClient", lambda: robot)
+    monkeypatch.setattr(asibot.client, "LookClient", lambda: Looker(list(looks or [])))
     monkeypatch.setattr(sys, "argv", ["program.py", "asibot-sim"])
     exec(compile(text, "program.py", "exec"), {"__name__": "__main__"})
     return robot
@@ -219,25 +249,75 @@ def test_a_refused_straight_move_is_made_as_a_joint_move_with_a_notice(monkeypat
         run_generated(text, monkeypatch, {"movl": "estop"})
 
 
-def test_close_and_check_stops_with_the_sentence_after_opening_again(monkeypatch, capsys):
+def test_a_close_on_nothing_opens_goes_back_up_and_stops_with_the_sentence(monkeypatch, capsys):
+    """Issue 52: never left down at the spot with the gripper open: up ABOVE_HEIGHT, then the end."""
     text = S.generate("pick", S.pick_it_up("grasp-can"), POINTS)
     robot = run_generated(text, monkeypatch, {})
     assert ("grip", True) in robot.calls and robot.calls[-1] == ("close",)
+    said = "Nothing in the gripper after closing at grasp-can; the arm went back up, the gripper open."
     with pytest.raises(SystemExit) as ended:
         run_generated(text, monkeypatch, {"holding": False})
-    assert ended.value.code == "nothing in the gripper after closing at grasp-can"
+    assert ended.value.code == said
     robot = asibot.client.CartesianClient()   # the recorder of that run
-    grips = [c for c in robot.calls if c[0] == "grip"]
-    assert grips[-2:] == [("grip", True), ("grip", False)]
-    assert robot.calls[-1] == ("close",)      # and no lift after it
-    assert sum(c[0] == "movl" for c in robot.calls) == 1
+    after = robot.calls[robot.calls.index(("grip", True)) + 1:]
+    assert after == [("grip", False), ("movl", [CAN[0], CAN[1], CAN[2] + S.ABOVE_HEIGHT, *CAN[3:]], None),
+                     ("wait",), ("close",)]
     # Fingers that do not settle (pushing on the can's side) hold nothing either; other refusals end it as they are.
     with pytest.raises(SystemExit) as ended:
         run_generated(text, monkeypatch, {"grip": "timeout"})
-    assert ended.value.code == "nothing in the gripper after closing at grasp-can"
-    assert asibot.client.CartesianClient().calls[-2:] == [("grip", False), ("close",)]
+    assert ended.value.code == said
+    assert asibot.client.CartesianClient().calls[-1] == ("close",)
     with pytest.raises(RpcError, match="still moving"):
         run_generated(text, monkeypatch, {"grip": "estop"})
+
+
+THING = {"name": "red can", "colour": "red", "height": 0.12, "width": 0.066, "where": [0.0, 0.5, 0.02]}
+
+
+def test_a_taught_thing_is_looked_for_and_picked_where_it_stands_now(monkeypatch, capsys):
+    steps = S.pick_up_thing(THING)
+    assert [s.kind for s in steps] == ["open", "find", "move", "move", "close", "move"]
+    text = S.generate("pick_up_red_can", steps, {})
+    assert "0.5, 0.09" not in text          # no grasp of where it was taught: only what it is
+    robot = run_generated(text, monkeypatch, {}, looks=[(0.0, 0.62)])
+    out = capsys.readouterr().out
+    assert "I see the red can, 12 cm from where it was taught." in out and out.rstrip().endswith("done!")
+    moves = [c[:2] for c in robot.calls if c[0] in ("movj", "movl")]
+    assert moves == [("movj", [0.0, 0.62, 0.21, 180.0, 0.0]), ("movl", [0.0, 0.62, 0.09, 180.0, 0.0]),
+                     ("movl", [0.0, 0.62, 0.21, 180.0, 0.0])]
+
+
+def test_a_close_on_nothing_looks_again_and_tries_once_more(monkeypatch, capsys):
+    text = S.generate("pick_up_red_can", S.pick_up_thing(THING), {})
+    robot = run_generated(text, monkeypatch, {"holding": [False, True]}, looks=[(0.0, 0.62), (0.02, 0.6)])
+    out = capsys.readouterr().out
+    assert "Nothing in the gripper at the red can: I look for it again and try once more." in out
+    moves = [c[:2] for c in robot.calls if c[0] in ("movj", "movl")]
+    assert moves[-3:] == [("movj", [0.02, 0.6, 0.21, 180.0, 0.0]), ("movl", [0.02, 0.6, 0.09, 180.0, 0.0]),
+                          ("movl", [0.02, 0.6, 0.21, 180.0, 0.0])]       # the lift from where it was found again
+    # Twice nothing: up, open, and the sentence.
+    with pytest.raises(SystemExit) as ended:
+        run_generated(text, monkeypatch, {"holding": [False, False]}, looks=[(0.0, 0.62), (0.02, 0.6)])
+    assert ended.value.code == ("Nothing in the gripper after two tries at the red can; the arm went back up, "
+                                "the gripper open.")
+    last = asibot.client.CartesianClient().calls
+    assert last[-3:] == [("movl", [0.02, 0.6, 0.09 + S.ABOVE_HEIGHT, 180.0, 0.0], None), ("wait",), ("close",)]
+
+
+def test_a_thing_not_found_says_what_was_seen_and_the_arm_does_not_move(monkeypatch, capsys):
+    text = S.generate("pick_up_red_can", S.pick_up_thing(THING), {})
+    seen = "I looked for the red can and see a green object 9 cm tall, but no red can."
+    with pytest.raises(SystemExit) as ended:
+        run_generated(text, monkeypatch, {}, looks=[RpcError("not_found", seen)])
+    assert ended.value.code == seen
+    assert not [c for c in asibot.client.CartesianClient().calls if c[0] in ("movj", "movl")]
+
+
+def test_a_move_to_a_thing_nobody_looked_for_is_refused():
+    with pytest.raises(UserDataError, match="no step before it looks for the red can"):
+        S.generate("p", [S.Move(thing="red can")], {})
+    with pytest.raises(ValueError, match="a point or to a thing"):
+        S.Move(point="grasp-can", thing="red can")
 
 
 # --- storage and in sync --------------------------------------------------------------------------

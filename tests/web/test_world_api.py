@@ -18,7 +18,10 @@ from asibot.bus import Bus
 from asibot.testing import wait_until
 from asibot.web import world as world_module
 
-from ..common.scenes import CAN_R, CAN_TOP, CAN_XY, COUNTER, Scene, kitchen_info, kitchen_scene, pixel_of
+from asibot.client import LookClient
+from asibot.errors import RpcError
+
+from ..common.scenes import CAN_R, CAN_TOP, CAN_XY, COUNTER, GREEN, Scene, kitchen_info, kitchen_scene, pixel_of
 from .conftest import API_ROBOT as ROBOT, API_START as START, settle
 
 CAMERA = "kitchen"
@@ -37,13 +40,18 @@ def camera(web):
     bus.close()
 
 
-def show(web, camera, scene: Scene | np.ndarray, info: m.CameraInfo | None = None) -> m.CameraInfo:
-    """Publish one frame of `scene` (or of a depth image) and wait until the web server keeps it."""
+def show(web, camera, scene: Scene | np.ndarray, info: m.CameraInfo | None = None,
+         coloured: bool = False) -> m.CameraInfo:
+    """Publish one frame of `scene` (or of a depth image) and wait until the web server keeps it;
+    its picture all red, or `coloured` as the scene paints its things."""
     svc = web[1]
     info = info or kitchen_info()
     image = scene if isinstance(scene, np.ndarray) else scene.depth(info, pose=kitchen_info().pose)
-    rgb = np.zeros((info.height, info.width, 3), np.uint8)
-    rgb[:] = RED
+    if isinstance(scene, Scene) and coloured:
+        rgb = scene.rgb(info, pose=kitchen_info().pose)
+    else:
+        rgb = np.zeros((info.height, info.width, 3), np.uint8)
+        rgb[:] = RED
     ok, jpeg = cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
     sent = m.DepthImage(depth=image)
     world = svc.web.world
@@ -55,8 +63,9 @@ def show(web, camera, scene: Scene | np.ndarray, info: m.CameraInfo | None = Non
         camera[1].put(m.RgbImage(jpeg=jpeg.tobytes(), width=info.width, height=info.height))
         camera[2].put(info)
         try:
+            newest = svc.web.cameras.newest(ROBOT, CAMERA)
             return (np.array_equal(world._depth(ROBOT, CAMERA)[1], image) and world._info(ROBOT, CAMERA) == info
-                    and svc.web.cameras.newest(ROBOT, CAMERA) is not None)
+                    and newest is not None and newest.jpeg == jpeg.tobytes())
         except Exception:
             return False
     wait_until(kept, timeout=5)
@@ -245,3 +254,30 @@ def test_a_touched_pose_is_kept_as_a_named_point(web, camera, api):
     assert api.post("/api/points", json={"values": [0.0, 0.5, 0.09, 180, 0], "name": "can"}).json()["name"] == "can"
     refused(api.post("/api/points", json={"values": [0.0, 0.5, 0.09, 180, 0], "name": "can"}), 409, "can")
     refused(api.post("/api/points", json={"values": [0.0, 0.5, 0.09, 180]}), 422, "values")
+
+
+# --- issue 52: a taught thing, found where it stands now --------------------------------------
+def test_a_taught_can_is_found_where_it_stands_now_through_the_bus(web, camera, api):
+    """What a task's program asks (LookClient.find on keys.look_rpc): the can taught at CAN_XY,
+    moved 12 cm, is found there with the points above it and to grasp it; gone, the answer says
+    what the camera sees instead; a bad thing is a sentence."""
+    taught = {"name": "red can", "colour": "red", "height": CAN_TOP - COUNTER, "width": 2 * CAN_R,
+              "where": [CAN_XY[0], CAN_XY[1], (CAN_TOP + COUNTER) / 2]}
+    look = LookClient.on(web[1].fleet.bus, ROBOT, timeout=15)
+    moved = (CAN_XY[0] - 0.05, CAN_XY[1] + 0.11)
+    show(web, camera, Scene(cylinders=[(moved[0], moved[1], CAN_R, COUNTER, CAN_TOP)], cylinder_colours=[RED]),
+         coloured=True)
+    found = look.find(taught)
+    assert found["reach"][:2] == pytest.approx(moved, abs=0.02)      # depth.object_at's centre, seen from afar
+    assert found["above"][:2] == found["reach"][:2] and found["above"][2] > found["reach"][2] + 0.1
+    assert found["moved"] == pytest.approx(0.121, abs=0.02)
+    assert found["says"] == f"I see the red can, {found['moved'] * 100:.0f} cm from where it was taught."
+    green_box = (0.3 - 0.04, -0.2 - 0.04, COUNTER, 0.3 + 0.04, -0.2 + 0.04, COUNTER + 0.09)
+    show(web, camera, Scene(boxes=[green_box], box_colours=[GREEN]), coloured=True)
+    with pytest.raises(RpcError) as gone:
+        look.find(taught)
+    assert gone.value.code == "not_found"
+    assert gone.value.message == "I looked for the red can and see a green object 9 cm tall, but no red can."
+    with pytest.raises(RpcError, match="The thing to look for is not valid: .*height") as bad:
+        look.find({**taught, "height": True})
+    assert bad.value.code == "bad_request"

@@ -98,7 +98,8 @@ _CONTROLLER = [
     _KEEP_ESTOP,
 ]
 _SERVED_BY_OPERATORS = ([keys.tasks_rpc(v) for v in keys.RPC_VERBS_TASKS]
-                        + [keys.voice_rpc(v) for v in keys.RPC_VERBS_VOICE])
+                        + [keys.voice_rpc(v) for v in keys.RPC_VERBS_VOICE]
+                        + _robots(keys.look_rpc, names=("*",)))
 _OPERATOR = [
     (("put", "delete"), _robots(keys.estop, keys.events)
      + [keys.ALL_VOICE_AUDIO, keys.voice_heard(), _every(keys.voice_events, "*")]),
@@ -116,7 +117,8 @@ PROGRAM_NAV_VERBS = ("goto", "cancel", "result", "status", "places", "save_place
                      "settings", "set_pose", "map_start", "map_stop", "map_save")
 _PROGRAM = [
     (("query",), _robots(*(lambda r, v=v: keys.cart_rpc(r, v) for v in PROGRAM_CART_VERBS))
-     + _robots(*(lambda r, v=v: keys.nav_rpc(r, v) for v in PROGRAM_NAV_VERBS))),
+     + _robots(*(lambda r, v=v: keys.nav_rpc(r, v) for v in PROGRAM_NAV_VERBS))
+     + _robots(*(lambda r, v=v: keys.look_rpc(r, v) for v in keys.RPC_VERBS_LOOK))),
 ]
 _GRANTS = {"reader": _READ, "driver": _READ + _DRIVER, "controller": _READ + _CONTROLLER,
            "operator": _READ + _OPERATOR, "program": _READ + _PROGRAM}

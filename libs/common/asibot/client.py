@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import os
 import time
-from typing import Self, Sequence, TypedDict, cast
+from typing import Mapping, Self, Sequence, TypedDict, cast
 
 from asibot.safety import estop
 from asibot import keys
@@ -22,6 +22,9 @@ from asibot.safety.identity import Identity
 
 #: Per-call timeout for quick verbs, s.
 CALL_TIMEOUT = 5.0
+#: A look waits for fresh pictures from every camera of the robot: a second or two when
+#: nobody watched them before.
+FIND_TIMEOUT = 15.0
 #: How often NavClient.wait asks how the goal goes, s.
 WAIT_POLL = 0.2
 
@@ -252,6 +255,25 @@ class CartesianClient(_Client):
         pendant. The reply: {"duration": s} and the step's target, "joints" (deg) or "point".
         The page's verb: a program run by the page's runner may not call it (docs/sandbox.md)."""
         return self._call("jog", axis=axis, step=step, level=level)
+
+
+class LookClient(_Client):
+    """Looking with a robot's cameras for a thing a carer taught (asibot.things), answered by
+    the web service, which keeps the cameras' pictures and calibrations:
+    `LookClient("asibot-sim").find(red_can)`, then move to what it answers."""
+
+    _probe, _service = "find", "web"
+
+    def _key(self, verb: str) -> str:
+        return keys.look_rpc(self._opened(), verb)
+
+    def find(self, thing: Mapping[str, object]) -> dict:
+        """Where `thing` ({"name", "colour", "height", "width", "where"}: what the carer taught)
+        stands now: {"says", "above", "reach", "moved", "seen"}. "above" is the point over it
+        and "reach" the grasp, both from where it stands now (m, deg); "moved" how far it is
+        from where it was taught (m); "seen" what else the cameras see. RpcError "not_found"
+        with what they saw instead, "unreachable" when it stands out of the arm's reach."""
+        return self._call("find", FIND_TIMEOUT, thing=dict(thing))
 
 
 class TasksClient(_Client):

@@ -12,6 +12,7 @@ CODES = (
     "unavailable",   # nobody serves this (service down, driver absent)
     "fault",         # the hardware reports a fault; reset it first
     "not_allowed",   # the router's access control refuses this login; use another role's
+    "not_found",     # what was looked for is not there (a taught thing the cameras do not see)
     "internal",      # a bug: the server caught an unexpected exception
 )
 

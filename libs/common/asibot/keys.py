@@ -20,6 +20,7 @@ RPC_VERBS_NAV = ("goto", "cancel", "result", "status", "places", "save_place", "
                  "save_position", "recall_position", "drive", "turn", "primitive", "settings", "set_pose",
                  "localize", "save_map", "map_start", "map_stop", "map_save")
 RPC_VERBS_PERCEPTION = ("find",)
+RPC_VERBS_LOOK = ("find",)
 RPC_VERBS_TASKS = ("list", "launch", "stop", "status")
 RPC_VERBS_VOICE = ("status", "settings", "learn", "forget", "learned")
 
@@ -160,6 +161,13 @@ def nav_rpc(robot_id: str, verb: str) -> str:
 def perception_rpc(robot_id: str, verb: str) -> str:
     """Perception's verbs (`find`: where a coloured object is, in the robot's base frame)."""
     return f"{robot(robot_id)}/perception/rpc/{_chunk(verb, 'verb')}"
+
+
+def look_rpc(robot_id: str, verb: str) -> str:
+    """Looking with a robot's cameras for a thing a carer taught (`find`: where it stands now,
+    and the grasp from there: asibot.things), answered by the web service, which keeps the
+    cameras' pictures and calibrations."""
+    return f"{robot(robot_id)}/look/rpc/{_chunk(verb, 'verb')}"
 
 
 def tasks_rpc(verb: str) -> str:

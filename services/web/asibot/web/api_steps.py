@@ -44,15 +44,24 @@ class TemplateBody(Strict):
 
 class NewFromSteps(Strict):
     name: Name | None = Field(None, description="the program's name; when left out, the template's and the "
-                                                 "point's (pick_up_red-can)")
+                                                 "point's or thing's (pick_up_red-can)")
     template: Literal["empty", "pick_it_up", "put_it_down"] = Field(
-        description="no steps yet, or a template's steps at `point`")
+        description="no steps yet, or a template's steps at `point` (or, to pick it up, of `thing`)")
     point: Name | None = None
+    thing: dict | None = Field(None, description="Pick it up: a taught thing (name, colour, height, width, where: "
+                                                 "asibot.things), looked for wherever it stands when the program runs")
 
 
-def _template(data: UserData, template: str, point: str | None) -> list[steplib.Step]:
+def _template(data: UserData, template: str, point: str | None, thing: dict | None = None) -> list[steplib.Step]:
     if template == "empty":
         return []
+    if thing is not None:
+        if template != "pick_it_up":
+            raise UserDataError("Only Pick it up is made from a taught thing; Put it down needs a point.")
+        try:
+            return steplib.pick_up_thing(thing)
+        except ValueError as exc:
+            raise UserDataError(f"The thing to pick up is not valid: {exc}") from None
     if point is None:
         raise UserDataError("Choose the point the template is made from.")
     data.point(point)   # NotFound with the point's name
@@ -106,7 +115,9 @@ def template_steps(name: str, body: TemplateBody, request: Request) -> dict:
 @router.post("/step-programs", summary="a new program made of steps: none yet, or a template's at a point")
 def new_from_steps(body: NewFromSteps, request: Request) -> dict:
     data = web_of(request).data
-    steps = _template(data, body.template, body.point)
-    name = body.name or steplib.program_name(body.template, body.point, data.programs())
+    steps = _template(data, body.template, body.point, body.thing)
+    named = body.thing.get("name") if body.thing is not None else body.point
+    name = body.name or steplib.program_name(body.template, named if isinstance(named, str) else None,
+                                             data.programs())
     made = data.steps.save(name, steps, new=True)
     return _answer(data, name, made.steps, text=made.text, in_sync=True, points_changed=False)

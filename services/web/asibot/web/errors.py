@@ -16,7 +16,7 @@ from asibot.errors import RpcError
 from asibot.web.userdata import AlreadyExists, NotFound, UserDataError
 
 #: HTTP status of each RPC error code; any other code is a conflict with the robot's state.
-RPC_STATUS = {"bad_request": 400, "not_allowed": 403, "unavailable": 503, "timeout": 504, "internal": 500}
+RPC_STATUS = {"bad_request": 400, "not_allowed": 403, "not_found": 404, "unavailable": 503, "timeout": 504, "internal": 500}
 
 
 def refusal(status: int, code: str, message: str) -> JSONResponse:

@@ -20,7 +20,7 @@ import uvicorn
 from asibot import local_http, runtime
 from asibot.bus import Bus
 from asibot.files import private_dir
-from asibot.web import guard, lan as lan_access
+from asibot.web import guard, lan as lan_access, look_bus
 from asibot.web.app import Web, create_app, stop_quietly
 from asibot.web.cameras import Cameras
 from asibot.web.fleet import Fleet
@@ -87,6 +87,7 @@ class WebService(runtime.Service):
             names += [*lan_access.lan_addresses(), socket.gethostname(), f"{socket.gethostname()}.local"]
         cameras = Cameras(bus)
         world = World(bus, cameras, data.folder, motion.inverse, self.fleet.point)
+        look_bus.serve(bus, world)
         self.web = Web(fleet=self.fleet, motion=motion, data=data, runner=runner, live=live,
                        cameras=cameras, tasks=tasks, voice=VoiceRelay(bus, live.send), world=world,
                        callers=local_http.Callers(n for n in names if n not in ("0.0.0.0", "::")))

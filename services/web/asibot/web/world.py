@@ -25,7 +25,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from asibot import depth, keys, messages, robots
+from asibot import depth, keys, messages, robots, things
 from asibot.bus import Bus, OnDemand
 from asibot.errors import MessageError, RpcError
 from asibot.messages import CameraInfo, DepthImage
@@ -232,20 +232,47 @@ class World:
             found = depth.object_at(image, info, pose, u, v)
         except depth.DepthError as exc:
             raise RpcError("bad_request", str(exc)) from None
-        fingers = spec.finger_length
-        if found.kind == "object":
-            x, y = found.centre[:2]
-            reach_z = found.top - spec.grip_depth + fingers
-        else:
-            x, y = found.surface[:2]
-            reach_z = found.top + SURFACE_CLEARANCE + fingers
-        above = [x, y, found.top + ABOVE_HEIGHT + fingers, *TOOL_DOWN]
-        reach = [x, y, reach_z, *TOOL_DOWN]
+        above, reach = grasp_points(found, spec)
         rgb = self._rgb(robot, name)
         colour = depth.colour_name(rgb, found.region) if rgb is not None and found.region is not None else None
         return {"found": found.as_json(), "colour": colour, "says": describe(found, colour),
                 "above": self._candidate(robot, above), "reach": self._candidate(robot, reach),
                 "names": spec.joint_names}
+
+    # --- a taught thing, found again ---------------------------------------------------------
+    def find(self, robot: str, thing: things.Thing) -> dict[str, Any]:
+        """Where `thing` stands now, as every camera of `robot` with a colour picture sees it,
+        and the points above it and to grasp it from there (asibot.things): what a taught
+        pick looks for when it runs, so it finds the can where it stands today. RpcError
+        "not_found" says what the cameras saw instead, "unreachable" why the arm cannot."""
+        spec = _spec(robot)
+        colour = set(self.cameras.names(robot))
+        seen: list[things.Seen] = []
+        for name in self.names(robot):
+            if name not in colour:
+                continue
+            info = self._info(robot, name)
+            pose = self.pose(robot, name, info)
+            _, image = self._depth(robot, name)
+            try:
+                seen += things.objects_in_view(image, self._rgb(robot, name), info, pose, name)
+            except depth.DepthError:   # a frame that does not match its description: the other cameras still look
+                continue
+        if not colour:
+            raise RpcError("unavailable", f"{robot} has no camera sending colour pictures, so it cannot look "
+                                          f"for the {thing.name}.")
+        best = things.choose(thing, seen)
+        if best is None:
+            raise RpcError("not_found", things.not_found(thing, seen))
+        above, reach = (self._candidate(robot, p) for p in grasp_points(best.found, spec))
+        moved = things.moved(thing, best)
+        for candidate in (above, reach):
+            if candidate["unreachable"] is not None:
+                raise RpcError("unreachable", f"I see the {thing.name} ({best.words()}, {moved * 100:.0f} cm from where "
+                                              f"it was taught), but the arm cannot get to it: {candidate['unreachable']}")
+        return {"says": f"I see the {thing.name}, {moved * 100:.0f} cm from where it was taught.",
+                "above": above["point"], "reach": reach["point"], "moved": round(moved, 3),
+                "seen": [s.words() for s in seen]}
 
     def _candidate(self, robot: str, point: list[float]) -> dict[str, Any]:
         point = [round(float(c), 4) for c in point]
@@ -306,6 +333,20 @@ def _spec(robot: str) -> robots.RobotSpec:
         return robots.get(robot)
     except KeyError:
         raise RpcError("bad_request", f"There is no robot {robot!r}; choose one of {', '.join(robots.ids())}.") from None
+
+
+def grasp_points(found: depth.Touched, spec: robots.RobotSpec) -> tuple[list[float], list[float]]:
+    """The tool points above what was found (pointing down, the fingertips ABOVE_HEIGHT over
+    its top) and to reach it (an object: the fingertips the robot's grip depth below its top,
+    at its centre; a surface: just over it)."""
+    fingers = spec.finger_length
+    if found.kind == "object":
+        x, y = found.centre[:2]
+        reach_z = found.top - spec.grip_depth + fingers
+    else:
+        x, y = found.surface[:2]
+        reach_z = found.top + SURFACE_CLEARANCE + fingers
+    return [x, y, found.top + ABOVE_HEIGHT + fingers, *TOOL_DOWN], [x, y, reach_z, *TOOL_DOWN]
 
 
 def fingertips(point: list[float], spec: robots.RobotSpec) -> list[float]:

@@ -32,7 +32,8 @@ const samePath = (a, b) => a !== null && b !== null && a.length === b.length && 
 
 // What a row says while the server has not described it (a point it names is gone).
 function plain(step) {
-  if (step.kind === 'move') return `Move ${step.above ? 'above' : 'to'} ${step.point}`;
+  if (step.kind === 'move') return `Move ${step.above ? 'above' : 'to'} ${step.thing ? `the ${step.thing}` : step.point}`;
+  if (step.kind === 'find') return `Look for the ${step.thing.name}`;
   if (step.kind === 'repeat') return `Repeat ${step.times} times`;
   if (step.kind === 'wait') return `Wait ${step.seconds} s`;
   if (step.kind === 'say') return `Say “${step.text}”`;
@@ -189,7 +190,17 @@ export function stepsEditor({ onSaved, showPython }) {
   const fields = (step, path) => {
     const set = (key, value) => { step[key] = value; changed(); };
     const box = el('div', { class: 'row step-fields', role: 'group', 'aria-label': `Step ${number(path)}` });
-    if (step.kind === 'move') {
+    if (step.kind === 'move' && step.thing) {
+      // A move to a thing goes where the step that looks for it finds it, when it runs.
+      const how = el('select', { onchange: (e) => set('how', e.target.value) },
+        ...HOW.map(([v, text]) => el('option', { value: v, selected: v === step.how }, text)));
+      box.append(el('span', {}, `To the ${step.thing}, where it is found`), field('How', how),
+        field('Above it', el('input', { type: 'checkbox', checked: step.above, onchange: (e) => set('above', e.target.checked) })),
+        field('Slowly', el('input', { type: 'checkbox', checked: step.slow, onchange: (e) => set('slow', e.target.checked) })));
+    } else if (step.kind === 'find') {
+      const t = step.thing;
+      box.append(el('span', {}, `Looks for the ${t.name}: a ${t.colour} object ${Math.round(t.height * 100)} cm tall, near where it was taught.`));
+    } else if (step.kind === 'move') {
       const point = el('select', { onchange: (e) => set('point', e.target.value) },
         ...[...new Set([step.point, ...points.map((p) => p.name)])].map((n) => el('option', { value: n, selected: n === step.point }, n)));
       const how = el('select', { onchange: (e) => set('how', e.target.value) },

@@ -108,11 +108,22 @@ function touchResult(touched) {
       return p;
     }, (p) => `Kept as ${p.name}: the grasp at what you touched.`),
   }, 'Keep as a point');
-  // The shortest way from a touch to a task: keep the grasp as a point, make the "Pick it up"
-  // program of steps from it, and go on to the Assigner with that program chosen.
+  // The shortest way from a touch to a task: remember what was touched (its colour and size,
+  // and where it stood), make the "Pick it up" program of steps that looks for it when it runs,
+  // and go on to the Assigner with that program chosen. A thing whose colour the camera cannot
+  // tell is kept as a point, picked where it stands now.
+  const thingName = () => name.value.trim() || (touched.colour ? `${touched.colour} object` : touched.name);
   const pickItUp = el('button', {
     type: 'button', class: 'primary', hidden: !touched.reach.joints,
     onclick: () => attempt(async () => {
+      const found = touched.found;
+      if (found.kind === 'object' && touched.colour) {
+        const thing = { name: thingName(), colour: touched.colour, height: found.height, width: found.width, where: found.centre };
+        const program = await api.post(paths.stepPrograms, { template: 'pick_it_up', thing });
+        remember('assigner.program', program.name);
+        location.hash = 'assigner';
+        return program;
+      }
       const body = { values: touched.reach.point };
       body.name = name.value.trim() || touched.name;
       const point = await api.post(paths.points, body);
