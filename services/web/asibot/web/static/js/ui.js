@@ -48,10 +48,12 @@ function watch(box) {
 }
 
 // Show a sentence under the tabs: kind 'error' (stays), 'stop' (red, stays) or 'info' (good news).
-export function notify(text, kind = 'error') {
+// `undo`: { label, run } adds a button that takes back what was just done (a deletion).
+export function notify(text, kind = 'error', undo = null) {
   const box = document.getElementById('notice');
   watch(box);
-  box.replaceChildren(el('span', {}, text),
+  const back = undo && el('button', { type: 'button', onclick: () => { box.hidden = true; undo.run(); } }, undo.label);
+  box.replaceChildren(el('span', {}, text), ...(back ? [back] : []),
     el('button', { type: 'button', onclick: () => { box.hidden = true; } }, 'Dismiss'));
   box.className = { error: 'notice', stop: 'notice stop', info: 'notice info' }[kind];
   box.setAttribute('role', kind === 'info' ? 'status' : 'alert');

@@ -2,11 +2,22 @@
 // made (name, program, words, icon) is kept across tab switches and reloads (keep.js).
 import { api, paths } from '../api.js';
 import { kept, recall, remember, setKept } from '../keep.js';
-import { attempt, el, notify } from '../ui.js';
+import { attempt, confirmable, el, notify } from '../ui.js';
 
 export default {
   mount(root) {
-    const name = kept('assigner.name', el('input', { type: 'text', 'aria-label': 'Task name', placeholder: 'Give me the red can' }));
+    const name = kept('assigner.name', el('input', { type: 'text', 'aria-label': 'Task name', 'aria-describedby': 'assigner-name-error',
+      placeholder: 'for example: Give me the red can' }));
+    // A missing name is said at the field, not in a banner far from it.
+    const nameError = el('p', { id: 'assigner-name-error', class: 'field-error', role: 'alert', hidden: true });
+    const nameIs = (problem) => {
+      nameError.textContent = problem || '';
+      nameError.hidden = !problem;
+      if (problem) name.setAttribute('aria-invalid', 'true'); else name.removeAttribute('aria-invalid');
+    };
+    name.addEventListener('input', () => nameIs(null));
+    let taskNames = [];
+    let editing = null;     // the task whose Edit filled the form: saving it again replaces it without asking
     const program = kept('assigner.program', el('select', { 'aria-label': 'Program' }));
     const words = el('div', { class: 'chips', role: 'group', 'aria-label': 'Words that launch it' });
     const icons = el('div', { class: 'icons', role: 'radiogroup', 'aria-label': 'Icon' });
@@ -56,28 +67,50 @@ export default {
         type: 'button', role: 'radio', 'aria-checked': String(x.name === icon),
         'aria-label': `Icon ${x.name.replace(/\.[a-z]+$/, '')}`, dataset: { icon: x.name }, onclick: () => pickIcon(x.name),
       }, el('img', { src: paths.icon(x.name), alt: '' }))));
+      taskNames = t.tasks.map((x) => x.name);
       tasks.replaceChildren(...(t.tasks.length ? t.tasks.map((x) => el('li', {},
         el('img', { src: paths.icon(x.icon), alt: '', width: '48', height: '48' }),
         el('span', { class: 'pname' }, x.name),
         el('span', { class: 'pvals' }, `${x.program}.py${x.words.length ? ` · "${x.words.join('", "')}"` : ''}`),
         el('button', {
           type: 'button', 'aria-label': `Edit ${x.name}`, onclick: () => {
+            editing = x.name;
             setKept(name, x.name); setKept(program, x.program); chosenWords = new Set(x.words);
             remember('assigner.words', [...chosenWords]); pickIcon(x.icon); refresh();
           },
         }, 'Edit'),
-        el('button', {
-          type: 'button', class: 'danger', 'aria-label': `Delete task ${x.name}`,
-          onclick: () => attempt(async () => { await api.del(paths.task(x.name)); await refresh(); }, 'Task deleted.'),
-        }, 'Delete'))) : [el('li', { class: 'muted' }, 'No tasks yet.')]));
+        // Deleting asks first, and can be undone from the notice that says it is gone.
+        confirmable('Delete', { 'aria-label': `Delete task ${x.name}` }, () => attempt(async () => {
+          await api.del(paths.task(x.name));
+          await refresh();
+          notify(`Task "${x.name}" deleted.`, 'info', {
+            label: 'Undo', run: () => attempt(async () => {
+              await api.put(paths.task(x.name), { program: x.program, words: x.words, icon: x.icon });
+              await refresh();
+            }, `Task "${x.name}" is back.`),
+          });
+        }), { ask: 'Sure? Touch again to delete' }))) : [el('li', { class: 'muted' }, 'No tasks yet.')]));
     };
-    const save = () => attempt(async () => {
-      if (!icon) throw new Error('Choose an icon for the task.');
-      const r = await api.put(paths.task(name.value.trim()),
-        { program: program.value, words: [...chosenWords], icon });
-      await refresh();
-      return r;
-    }, (r) => `Task "${r.name}" saved: it is on the Launcher.`);
+    const save = () => {
+      const typed = name.value.trim();
+      if (!typed) {
+        nameIs('Name the task first: the words on its button, such as "Give me the red can".');
+        name.focus();
+        return;
+      }
+      attempt(async () => {
+        if (!icon) throw new Error('Choose an icon for the task.');
+        const r = await api.put(paths.task(typed), { program: program.value, words: [...chosenWords], icon });
+        editing = r.name;
+        await refresh();
+        return r;
+      }, (r) => `Task "${r.name}" saved: it is on the Launcher.`);
+    };
+    // Saving under the name of another task replaces it: the button asks first.
+    const saveButton = confirmable('Save task', { class: 'primary big' }, save, {
+      ask: 'A task has this name: touch again to replace it',
+      needed: () => taskNames.includes(name.value.trim()) && editing !== name.value.trim(),
+    });
     upload.addEventListener('change', () => attempt(async () => {
       const form = new FormData();
       form.append('file', upload.files[0]);
@@ -89,14 +122,14 @@ export default {
     root.replaceChildren(el('div', { class: 'columns' },
       el('section', { class: 'panel', 'aria-label': 'New task' },
         el('h2', {}, 'Make a task'),
-        el('div', { class: 'row' }, el('label', {}, 'Task name ', name)),
+        el('div', { class: 'row' }, el('label', {}, 'Task name ', name)), nameError,
         el('div', { class: 'row' }, el('label', {}, 'Program ', program)),
         el('h3', {}, 'Words that launch it'), words,
         el('div', { class: 'row' }, el('label', {}, 'New word ', newWord),
           el('button', { type: 'button', onclick: addWord }, 'Add and choose it')),
         el('h3', {}, 'Icon'), icons,
         el('div', { class: 'row' }, el('label', {}, 'Or upload an image: ', upload)),
-        el('div', { class: 'row' }, el('button', { type: 'button', class: 'primary big', onclick: save }, 'Save task'))),
+        el('div', { class: 'row' }, saveButton)),
       el('section', { class: 'panel', 'aria-label': 'Tasks' }, el('h2', {}, 'Tasks'), tasks)));
     refresh().catch((e) => notify(e.message));
     return {};

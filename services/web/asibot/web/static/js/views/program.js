@@ -136,7 +136,8 @@ export default {
         + `trash ${size(s.trash)}: ${items}).`;
       emptyTrash.disabled = !s.trash_items;
     };
-    const emptyTrash = confirmable('Empty the trash', {}, () => attempt(async () => {
+    // Disabled until the storage is known: a button that turns off under a Tab press is a trap.
+    const emptyTrash = confirmable('Empty the trash', { disabled: true }, () => attempt(async () => {
       const r = await api.del(paths.trash);
       showStorage(r.storage);
       return r;
