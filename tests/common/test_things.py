@@ -110,7 +110,10 @@ def test_a_can_that_is_gone_is_not_found_and_the_user_hears_what_is_there(taught
     assert things.not_found(taught, look([], others={})) == "I looked for the red can and see nothing standing there."
 
 
-def test_a_can_0_8_m_from_where_it_was_taught_is_not_taken_for_it(taught):
+def test_a_can_further_than_the_search_radius_is_not_taken_for_it(taught, monkeypatch):
+    """The kitchen camera sees less than the radius (1.2 m, the counter in the arm's reach) around
+    the can: the rule is checked with a radius of 0.5 m and the can 0.8 m away."""
+    monkeypatch.setattr(things, "SEARCH_RADIUS", 0.5)
     everything = look([can(CAN_XY[0], CAN_XY[1] - 0.8)])
     assert any(s.colour == "red" for s in everything)
     assert things.choose(taught, everything) is None
@@ -152,7 +155,8 @@ def test_of_two_red_cans_the_one_of_its_size_or_nearer_its_place_is_chosen(taugh
     (dict(width=0.09), True),              # +0.024 m: within max(0.03, 40 %)
     (dict(width=0.1), False),
     (dict(y=0.5 + 0.45), True),
-    (dict(x=0.4, y=0.5 + 0.4), False),     # 0.57 m away
+    (dict(x=0.4, y=0.5 + 0.4), True),      # 0.57 m away: on the counter still
+    (dict(x=0.9, y=0.5 + 0.9), False),     # 1.27 m away
 ])
 def test_choose_takes_only_its_colour_about_its_size_within_the_search_radius(other, fits):
     thing = Thing("red can", "red", 0.12, 0.066, (0.0, 0.5, 0.02))
@@ -170,8 +174,8 @@ def test_what_is_said_when_nothing_fits_names_each_object_once_and_only_a_few():
     assert things.not_found(thing, two_views + [seen("green", 0.3, 0.0, 0.09)]) == (
         "I looked for the red can and see a red object 5 cm tall, shorter than the red can, and a green object 9 cm "
         "tall, but no red can.")
-    far_and_wide = seen("red", 0.0, -0.4, 0.12, width=0.2)
-    assert "a red object 12 cm tall, wider than the red can and 0.90 m from where it was taught" in \
+    far_and_wide = seen("red", 0.0, -0.8, 0.12, width=0.2)
+    assert "a red object 12 cm tall, wider than the red can and 1.30 m from where it was taught" in \
         things.not_found(thing, [far_and_wide])
     many = [seen(c, 0.1 * i, 0.0, 0.1) for i, c in enumerate(["green", "blue", "yellow", "purple", "orange"])]
     said = things.not_found(thing, many)

@@ -34,9 +34,11 @@ MIN_PIXELS = 20
 #: make one blob, and each object found in it leaves the rest to seed again.
 MAX_SEEDS = 6
 
-#: A taught thing is looked for this far (horizontally, m) from where it was taught: set down
-#: again on the same counter, not carried across the room, where another like it is likelier.
-SEARCH_RADIUS = 0.5
+#: A taught thing is looked for this far (horizontally, m) from where it was taught: anywhere
+#: on the counter within the arm's reach (bench_pick put the can 0.58 m away, and 0.5 m missed
+#: it), not carried across the room, where another like it is likelier. Of two alike, the one
+#: nearer the taught place wins (DISTANCE_WEIGHT).
+SEARCH_RADIUS = 1.2
 #: Its height may differ from the taught one by this much (m) or this share of it, whichever is
 #: more: object_at measures a height to a few mm, but a can stands on a coaster or a lid is off.
 HEIGHT_SLACK, HEIGHT_SHARE = 0.03, 0.30

@@ -55,6 +55,21 @@ class Cameras:
             kept = self._frames.get((robot, name))
         return kept if kept is not None and time.monotonic() - kept[1] < SILENT_S else None
 
+    def since(self, robot: str, name: str, start: float, timeout: float) -> bool:
+        """Wait (up to `timeout` s) for a picture received after `start` (time.monotonic()):
+        one that shows the world as it is now, not as it was before the asker's moment."""
+        deadline = time.monotonic() + timeout
+        self._demand.want()
+        with self._cond:
+            while True:
+                kept = self._frames.get((robot, name))
+                if kept is not None and kept[1] > start:
+                    return True
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._cond.wait(left)
+
     def newest(self, robot: str, name: str) -> RgbImage | None:
         """The camera's newest colour image (decoded from its message now), or None while it
         sends none; the world's point cloud takes its colours from it."""

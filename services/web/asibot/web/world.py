@@ -37,6 +37,8 @@ from asibot.web.userdata.folder import Folder
 
 #: "Go above it": the fingertips this far above the touched thing's top, m, tool pointing down.
 ABOVE_HEIGHT = 0.12
+#: A look waits this long at most for each camera's first pictures taken after it was asked, s.
+FRESH_WAIT_S = 2.0
 #: "Reach it" on a surface (nothing stands there): the fingertips this far above it, m.
 SURFACE_CLEARANCE = 0.01
 #: The tool pointing straight down: rot(y') and rot(z''), deg (the worked pick's DOWN).
@@ -245,12 +247,18 @@ class World:
         and the points above it and to grasp it from there (asibot.things): what a taught
         pick looks for when it runs, so it finds the can where it stands today. RpcError
         "not_found" says what the cameras saw instead, "unreachable" why the arm cannot."""
+        asked = time.monotonic()
         spec = _spec(robot)
         colour = set(self.cameras.names(robot))
         seen: list[things.Seen] = []
         for name in self.names(robot):
             if name not in colour:
                 continue
+            # Pictures taken after the question: the thing may have been moved a moment ago.
+            self._depths.want()
+            while not self._received_since(robot, name, asked) and time.monotonic() < asked + FRESH_WAIT_S:
+                time.sleep(0.01)
+            self.cameras.since(robot, name, asked, FRESH_WAIT_S)
             info = self._info(robot, name)
             pose = self.pose(robot, name, info)
             _, image = self._depth(robot, name)
@@ -273,6 +281,11 @@ class World:
         return {"says": f"I see the {thing.name}, {moved * 100:.0f} cm from where it was taught.",
                 "above": above["point"], "reach": reach["point"], "moved": round(moved, 3),
                 "seen": [s.words() for s in seen]}
+
+    def _received_since(self, robot: str, name: str, start: float) -> bool:
+        with self._lock:
+            kept = self._kept.get((robot, name, "depth"))
+        return kept is not None and kept.time > start
 
     def _candidate(self, robot: str, point: list[float]) -> dict[str, Any]:
         point = [round(float(c), 4) for c in point]
