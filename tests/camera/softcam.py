@@ -91,6 +91,8 @@ class SoftCam:
             for sensor in self.sensors:
                 sensor.stop()
                 sensor.close()
+            # The recording closes its file when the last reference to the recorder goes.
+            self.sensors = []
             self.recorder = None
 
 

@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import json
 import math
+import gc
 import os
 import subprocess
+import sqlite3
 import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -100,6 +102,21 @@ def test_the_software_device_publishes_what_it_was_fed(memory_bus, softcam):
     listener.close()
 
 
+def _unlocked(path) -> bool:
+    """Whether no one holds a lock on the SQLite file at `path` (a recording still written)."""
+    if not path.is_file():
+        return False
+    db = sqlite3.connect(path, timeout=0)
+    try:
+        db.execute("BEGIN EXCLUSIVE")
+        db.rollback()
+        return True
+    except sqlite3.OperationalError:
+        return False
+    finally:
+        db.close()
+
+
 def test_a_recording_plays_back_into_the_same_frames(tmp_path):
     path = tmp_path / "short.db3"
     cam = SoftCam(record=str(path))
@@ -112,8 +129,11 @@ def test_a_recording_plays_back_into_the_same_frames(tmp_path):
             assert source.read(2.0) is not None
     finally:
         cam.close()
-    del cam
-    assert path.is_file() and path.stat().st_size < 1_000_000
+    del cam, source
+    gc.collect()
+    # librealsense's writer closes the file from its own thread: wait until SQLite may lock it.
+    wait_until(lambda: _unlocked(path), 10, message=f"{path} stays locked by its writer")
+    assert path.stat().st_size < 1_000_000
     played = open_source(f"realsense-bag:{path}", StreamOptions(realtime=False))   # every frame, none dropped
     played.start()
     seen = {}

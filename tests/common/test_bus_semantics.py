@@ -14,7 +14,7 @@ from asibot import keys, messages as m
 from asibot.bus import Bus
 from asibot.bus.memory import intersects
 from asibot.errors import RpcError
-from asibot.testing import wait_until, release
+from asibot.testing import wait_until
 
 
 @pytest.fixture
@@ -140,7 +140,9 @@ def test_latched_values_reach_late_joiners_and_the_newest_wins(endpoint):
     with Bus("web", endpoint) as web, Bus("panel", endpoint) as panel, Bus("late", endpoint) as late:
         web.latch(keys.estop("r8"), m.EStop(engaged=True, reason="web"))
         time.sleep(0.01)
-        release(panel, "r8", reason="released at the panel")
+        # Plain latches: the bus's own rule (the newest stamp wins), not the estop's
+        # (asibot.safety.estop), whose followers would keep their own copies.
+        panel.latch(keys.estop("r8"), m.EStop(engaged=False, reason="released at the panel"))
         wait_until(lambda: len([x for x in late._get(keys.estop("r8"), b"", 0.5) if x]) == 2, 3)
         got = []
         late.subscribe(keys.estop("r8"), m.EStop, got.append, latest=True)
