@@ -1,11 +1,18 @@
-"""SYNC period jitter of the ASIBOT arm driver: the control loop's SYNC (before issue 29) beside
-the interface's periodic sender (after), idle and with both cores loaded.
+"""SYNC and set-points of the ASIBOT arm driver: SYNC's period jitter and the largest set-point
+step a drive applied per SYNC, for the three ways the master sends them, idle and with both
+cores loaded, in one run.
 
 Runs the arm driver (no Zenoh) and the five emulated drives in this process on a python-can
-virtual bus with a sniffer, streams a slow motion on every joint, and measures on the bus
-(each frame's time stamp): the SYNC period's deviation from 10 ms, p50 and p99, its longest
-gap, and the longest gap during a reset_fault of one tripped drive. "before" sends SYNC from
-the control loop (CanopenMaster(sync="loop")), "after" from the periodic sender (the default).
+virtual bus with a sniffer, drives every joint back and forth at full speed, and measures on
+the bus (each frame's time stamp) the SYNC period's deviation from 10 ms, p50 and p99, its
+longest gap and the longest gap during a reset_fault of one tripped drive; and in the drives
+(each SYNC's applied step, emulator.EmulatedDrive.steps) the largest step as a share of the
+joint's max speed times the period: above 1, a real drive in cyclic synchronous position
+jerks faster than the arm was planned for.
+- "loop": the control loop sends every frame (before issue 29);
+- "periodic": the interface's periodic sender repeats SYNC and each set-point apart (issue 29
+  to 53): a late control period leaves a SYNC without a new set-point and the next with two;
+- "synced": one clock sends each SYNC after one sample of set-points (since issue 53).
 On a virtual bus the periodic sender is python-can's sender thread; SocketCAN's is the kernel's
 broadcast manager, measured on a vcan interface when the machine has one (`--vcan vcan0`;
 this bench does not create interfaces).
@@ -19,13 +26,10 @@ import argparse
 import dataclasses
 import logging
 import os
-import subprocess
 import sys
 import threading
 import time
 import uuid
-from contextlib import contextmanager
-from typing import Iterator
 
 import can
 import numpy as np
@@ -33,7 +37,7 @@ import numpy as np
 from asibot.arm_driver import config, emulator
 from asibot.arm_driver.driver import ArmDriver
 from asibot.arm_driver.master import CanopenMaster
-from asibot.testing import wait_until
+from asibot.testing import busy_cores, wait_until
 
 from table import QUICK_HELP, print_table  # bench/table.py: run as `python bench/<name>.py`
 
@@ -62,19 +66,6 @@ class Sniffer(can.Listener):
         self.bus.shutdown()
 
 
-@contextmanager
-def burners(n: int) -> Iterator[None]:
-    """n processes spinning (both cores loaded), as `pytest --cpu-burners` does."""
-    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
-    try:
-        time.sleep(0.2 if n else 0)
-        yield
-    finally:
-        for p in procs:
-            p.kill()
-            p.wait()
-
-
 def buses(kind: str, channel: str) -> tuple[can.BusABC, can.BusABC, can.BusABC]:
     """(the drives', the master's, the sniffer's) on one virtual channel or vcan interface."""
     if kind == "virtual":
@@ -95,12 +86,22 @@ def measure(cfg: config.ArmConfig, kind: str, channel: str, sync: str, seconds: 
     try:
         driver.start()
         wait_until(lambda: states and states[-1].mode == "idle", 15, message=lambda: f"driver not up: {driver.fault}")
-        driver.command("position", [0.3, 0.3, -0.3, 0.3, 0.3])     # a slow motion: set-points change
         time.sleep(0.2)
         sniffer.take()
-        time.sleep(seconds)
+        for drive in emu.drives.values():
+            drive.steps.clear()
+        until = time.monotonic() + seconds
+        goals = ([0.3, 0.3, -0.3, 0.3, 0.3], [0.0] * 5)
+        while time.monotonic() < until:                       # back and forth at full speed
+            goal = goals[0]
+            driver.command("position", goal)
+            while time.monotonic() < until and max(abs(a - b) for a, b in zip(states[-1].positions, goal)) > 1e-3:
+                time.sleep(0.01)
+            goals = goals[::-1]
         syncs = np.asarray(sniffer.take())
         dev = np.abs(np.diff(syncs) - cfg.period) * 1000
+        step = max(max((abs(s) for s in emu.drives[j.node].steps), default=0)
+                   / abs(j.units.to_counts(j.max_velocity * cfg.period)) for j in cfg.joints)
         # One drive trips and is reset: the longest time without SYNC meanwhile.
         emu.over_current(3)
         wait_until(lambda: states[-1].mode == "fault", 5)
@@ -113,7 +114,7 @@ def measure(cfg: config.ArmConfig, kind: str, channel: str, sync: str, seconds: 
         during = [start, *[t for t in sniffer.take() if start <= t <= end], end]
         return {"p50": float(np.percentile(dev, 50)), "p99": float(np.percentile(dev, 99)),
                 "gap": float(np.max(np.diff(syncs))) * 1000, "reset_gap": float(np.max(np.diff(during))) * 1000,
-                "reset_s": end - start}
+                "reset_s": end - start, "step": step}
     finally:
         driver.close()
         emu.close()
@@ -137,19 +138,21 @@ def main() -> int:
     rows = []
     for kind, channel in targets:
         for load in ((0,) if args.quick else (0, cores)):     # the smoke run loads no cores
-            for sync, label in (("loop", "before: control loop"), ("periodic", "after: periodic sender")):
-                with burners(load):
+            for sync, label in (("loop", "control loop (before 29)"), ("periodic", "periodic sender (29 to 53)"),
+                                ("synced", "one clock, a sample a SYNC (now)")):
+                with busy_cores(load):
                     r = measure(cfg, kind, channel, sync, args.seconds)
                 bus = "virtual bus" if kind == "virtual" else f"vcan {channel} (BCM)" if sync == "periodic" else f"vcan {channel}"
                 rows.append((f"{label}, {bus}", "idle" if not load else f"{load} cores loaded",
                              f"{r['p50']:.2f}", f"{r['p99']:.2f}", f"{r['gap']:.1f}",
-                             f"{r['reset_gap']:.0f} of {r['reset_s'] * 1000:.0f}"))
+                             f"{r['reset_gap']:.0f} of {r['reset_s'] * 1000:.0f}", f"{r['step']:.2f}"))
     if not args.vcan:
         have = sorted(n for n in os.listdir("/sys/class/net") if n.startswith("vcan")) if os.path.isdir("/sys/class/net") else []
         rows.append(("SocketCAN BCM on vcan", f"not measured: {'run with --vcan ' + have[0] if have else 'no vcan interface here'}",
-                     "-", "-", "-", "-"))
+                     "-", "-", "-", "-", "-"))
     print_table(rows, header=("SYNC source", "machine", "|period - 10 ms| p50 (ms)", "p99 (ms)",
-                              "longest period (ms)", "longest gap during reset_fault (ms) of its duration"))
+                              "longest period (ms)", "longest gap during reset_fault (ms) of its duration",
+                              "largest step / (max speed x period)"))
     return 0
 
 

@@ -191,7 +191,7 @@ def test_set_points_change_in_place_and_a_dropped_frame_stops(rig):
     finally:
         frames.close()
         bus.shutdown()
-    with pytest.raises(ValueError, match="sync must be one of periodic, loop"):
+    with pytest.raises(ValueError, match="sync must be one of synced, periodic, loop"):
         CanopenMaster(bus, rig.cfg, sync="kernel")
 
 

@@ -181,6 +181,20 @@ def release(bus: Any, robot: str, reason: str = "released by a test", by: str = 
     return estop.latch(bus, robot, Identity("test"), False, reason, by)
 
 
+@contextlib.contextmanager
+def busy_cores(n: int = os.cpu_count() or 2) -> Iterator[None]:
+    """`n` processes spinning while the block runs (both cores of this machine busy): what a
+    real-time part must survive. For a test marked `alone` or a benchmark."""
+    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
+    try:
+        time.sleep(0.2 if n else 0)         # running before the block starts
+        yield
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait()
+
+
 def wait_until(predicate: Callable[[], object], timeout: float = 5.0, interval: float = 0.01,
                message: str | Callable[[], str] = "") -> object:
     """Poll until predicate() is truthy; return its value or raise AssertionError on timeout.

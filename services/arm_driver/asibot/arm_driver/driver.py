@@ -103,7 +103,7 @@ class ArmDriver(ReferencedArm):
         with self._lock:
             stats = self._ticker.stats() if self._ticker else {}
             return {"mode": self._mode(), "fault": self.fault, **self.counters,
-                    "frames_sent": self.master.frames_sent,
+                    "frames_sent": self.master.frames_sent, **self.master.lag(),
                     "period_jitter_p99_ms": round(stats.get("p99", 0.0) * 1000, 3)}
 
     def _mode(self) -> str:
@@ -160,7 +160,9 @@ class ArmDriver(ReferencedArm):
         self._check(fb, now)
         self._watch(now)
         with self._lock:
-            if self._faulted:
+            if not self.master.room():
+                targets = {}        # SYNC has not taken the last samples: the motion lags, never jumps
+            elif self._faulted:
                 targets = {n: fb[n].position for n in self.master.modes}
             else:
                 rad = self.ref.step(now)

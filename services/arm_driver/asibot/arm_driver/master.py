@@ -32,7 +32,7 @@ from canopen.objectdictionary import ObjectDictionary
 from asibot.arm_driver import cia402, cui, objects
 from asibot.arm_driver.cia402 import State
 from asibot.arm_driver.config import ArmConfig, Joint
-from asibot.arm_driver.cyclic import SYNC_COB_ID, CyclicFrames, LoopFrames, PeriodicFrames
+from asibot.arm_driver.cyclic import SYNC_COB_ID, CyclicFrames, LoopFrames, PeriodicFrames, SyncedFrames
 from asibot.arm_driver.emcy import Emcy
 from asibot.arm_driver.pdo import ON_CHANGE, PDO_INVALID, Layout
 
@@ -42,7 +42,7 @@ CAN_ERR_BUSOFF = 0x00000040
 CAN_ERR_RESTARTED = 0x00000100
 NMT_START = 0x01
 NMT_OPERATIONAL = 0x05
-SYNC_MODES = ("periodic", "loop")
+SYNC_MODES = ("synced", "periodic", "loop")
 #: s without a control period (outside a bring-up, whose calls have their own time-outs) after
 #: which the loop is taken as hung: the periodic sender would otherwise keep the drives holding
 #: on their last set-points for ever, deaf to the estop. Well above the stalls a loaded machine
@@ -99,12 +99,14 @@ class _ErrorFrames(can.Listener):
 class CanopenMaster:
     """One CAN bus, the drives of one arm.
 
-    `sync="periodic"` (the default) has the interface's periodic sender repeat SYNC, the
-    heartbeat and the set-points; `"loop"` sends them from cycle(), as before issue 29 (kept to
-    measure against, bench/bench_sync.py).
+    `sync="synced"` (the default) sends SYNC and a sample of set-points before each from one
+    clock (cyclic.SyncedFrames), the heartbeat from the interface's periodic sender;
+    `"periodic"` has the periodic sender repeat the set-points too, as after issue 29, and
+    `"loop"` sends every frame from cycle(), as before it (both kept to measure against,
+    bench/bench_sync.py).
     """
 
-    def __init__(self, bus: can.BusABC, config: ArmConfig, sync: str = "periodic") -> None:
+    def __init__(self, bus: can.BusABC, config: ArmConfig, sync: str = "synced") -> None:
         if sync not in SYNC_MODES:
             raise ValueError(f"sync must be one of {', '.join(SYNC_MODES)}, got {sync!r}")
         self.config = config
@@ -135,7 +137,9 @@ class CanopenMaster:
                 if layout.kind == "tpdo":
                     self.network.subscribe(layout.cob_id(j.node), functools.partial(self._on_tpdo, j.node, layout))
         self.network.connect()
-        self.frames: CyclicFrames = PeriodicFrames(bus) if sync == "periodic" else LoopFrames(self._send)
+        self.frames: CyclicFrames = (
+            SyncedFrames(bus, config.period, self.network.send_message) if sync == "synced"
+            else PeriodicFrames(bus) if sync == "periodic" else LoopFrames(self._send))
         # The loop's pulse, watched by a guard thread while the periodic sender runs.
         self._ticked = time.monotonic()
         self._bringing_up = 0
@@ -237,7 +241,7 @@ class CanopenMaster:
         (again after the guard stopped them: a reset_fault calls this)."""
         with self._lock:
             self._ticked, self.stalled, self._stall_told = time.monotonic(), 0.0, False
-        if isinstance(self.frames, PeriodicFrames) and self._guard is None:
+        if not isinstance(self.frames, LoopFrames) and self._guard is None:
             self._guard = threading.Thread(target=self._guard_loop, name="canopen-loop-guard", daemon=True)
             self._guard.start()
         try:
@@ -297,8 +301,21 @@ class CanopenMaster:
         rpdo3 = self.config.pdos["rpdo3"]
         self.frames.put(rpdo3.cob_id(node), rpdo3.encode({objects.TARGET_POSITION: counts}), self.config.period)
 
+    def lag(self) -> dict:
+        """How the set-points kept up with SYNC, for health: the SYNCs that found no new sample
+        (the control loop was late: the motion lagged) and the longest such lag, ms."""
+        frames = self.frames
+        if not isinstance(frames, SyncedFrames):
+            return {}
+        return {"late_syncs": frames.late, "longest_lag_ms": round(frames.longest_late * frames.period * 1000, 1)}
+
+    def room(self) -> bool:
+        """Whether SYNC has taken the set-points made so far, so the loop may make the next
+        (False: the motion lags a period; see cyclic.SyncedFrames)."""
+        return self.frames.room()
+
     def cycle(self, targets: dict[int, int]) -> None:
-        """One control period: each drive's set-point (in place for CSP: sent with every SYNC)."""
+        """One control period: each drive's set-point (CSP: a sample sent before a SYNC)."""
         if self.stalled:           # the guard stopped every periodic frame: none until reset_fault starts them
             return
         if self.frames.error:      # a periodic sender failed since the last period (taken: reported once)

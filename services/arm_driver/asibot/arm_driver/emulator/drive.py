@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import struct
+from collections import deque
 from dataclasses import dataclass, field
 
 from asibot.arm_driver import cia402, objects
@@ -98,6 +99,10 @@ class EmulatedDrive:
         self.setpoint_ack = False
         self._last_motion: float | None = None
         self._last_sync: float | None = None
+        # Each SYNC's set-point step while enabled in CSP (counts): a real drive follows each
+        # within one period, so a test reads here whether the master ever outran a joint.
+        self.steps: deque[int] = deque(maxlen=100_000)
+        self._applied: int | None = None
         self._last_heartbeat = -1e9
         # CiA 301: consumer monitoring starts with the first heartbeat heard, and stops after
         # one timeout event until the producer is heard again.
@@ -215,6 +220,10 @@ class EmulatedDrive:
                 data, pdo.pending = pdo.pending, None
                 self._apply_rpdo(pdo, data, now)
         if self.state is State.OPERATION_ENABLED and self.mode == objects.MODE_CSP:
+            target = self.od[(objects.TARGET_POSITION, 0)]
+            if self._applied is not None:
+                self.steps.append(target - self._applied)
+            self._applied = target
             last = self._last_sync if self._last_sync is not None else now
             self._move_towards(self._limited(self.od[(objects.TARGET_POSITION, 0)]), min(now - last, 0.05),
                                self.max_speed_counts)
@@ -312,6 +321,7 @@ class EmulatedDrive:
             self.velocity = 0.0
             self.goal = self.position
             self.state = state
+            self._applied = None        # a new enable starts a new stream of set-points
 
     def _controlword(self, cw: int, now: float) -> None:
         previous, self.controlword = self.controlword, cw
