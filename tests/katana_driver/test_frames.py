@@ -46,9 +46,79 @@ def test_a_refusal_is_the_error_flag_then_the_reason(line):
     with pytest.raises(p.FirmwareError, match=r"refused command 'D': no motor 9 \(axis 9\)"):
         line.katana.read(9)
     assert line.driver_side.sent()[-1] == p.ERROR_REQUEST == line.emulator_side.received()[-1]
-    assert line.emulator_side.sent()[-2] == p.encode_error_flag() == line.driver_side.received()[-2]
+    # The error flag at the length of 'd' (8 bytes and the CRC): what KNI's reader takes.
+    flag = line.emulator_side.sent()[-2]
+    assert flag == p.encode_error_reply(ord("D")) == line.driver_side.received()[-2]
+    assert len(flag) == 10 and flag[0] == 0xC0 and p.check_crc(flag) == b"\xc0" + bytes(7)
     assert len(line.driver_side.received()[-1]) == 57
     assert line.katana.echo()               # the line goes on
+
+
+class ScriptedPort:
+    """A serial line whose controller answers each request with the next of `answers`."""
+
+    def __init__(self, answers: list[bytes]) -> None:
+        self.answers, self.written, self._pending = list(answers), [], b""
+
+    def write(self, data: bytes) -> int:
+        self.written.append(bytes(data))
+        if data != p.ERROR_REQUEST and self.answers:
+            self._pending = self.answers.pop(0)
+        elif data == p.ERROR_REQUEST:
+            self._pending = p.encode_error_message(ord("D"), 3, 2, "not now")
+        return len(data)
+
+    def read(self, size: int = 1) -> bytes:
+        out, self._pending = self._pending[:size], self._pending[size:]
+        return out
+
+    def reset_input_buffer(self) -> None:
+        self._pending = b""
+
+
+def test_a_bare_3_byte_error_flag_is_an_incomplete_reply_as_kni_reads_it():
+    """KNI's reader (cdlCOM.cpp recv) wants the whole reply before it looks at the first byte:
+    `C0 <crc>` to a command whose reply is longer is too short, so the request is sent again,
+    and after the retries the controller did not answer; the reason is never asked."""
+    w = wire(bare_error_flag=True)
+    try:
+        with pytest.raises(Silent, match=r"did not answer command 'D' \(2 tries, 100 ms each; 2 of its answers "
+                                         r"were a bare 3-byte error flag, which KNI reads as an incomplete reply\)"):
+            w.katana.read(9)
+        assert w.driver_side.sent()[-2:] == [p.encode_request(p.read_motor(9))] * 2
+        assert p.ERROR_REQUEST not in w.emulator_side.received()
+        assert w.driver_side.received()[-1] == p.encode_error_flag()
+    finally:
+        w.line.close()
+
+
+def test_a_bare_error_flag_is_sent_again_and_never_asked_about():
+    """The same with the controller's side scripted: 'D' answered `C0 <crc>` twice."""
+    port = ScriptedPort([p.encode_error_flag()] * 2)
+    with pytest.raises(Silent, match="2 of its answers were a bare 3-byte error flag"):
+        Katana(port, timeout=0.05, retries=1).read(3)
+    assert port.written == [p.encode_request(p.read_motor(3))] * 2
+
+
+def test_an_error_reply_with_a_wrong_crc_is_sent_again_not_asked_about():
+    """KNI checks the CRC of an error reply before it asks why (cplSerial.cpp recv): a wrong one
+    is a WrongCRCException, and the request goes again."""
+    flag = bytes([0xC0]) + bytes(7)                     # the error flag at the length of 'd'
+    crc = p.crc16(flag) ^ 0x0101
+    bad = flag + bytes([crc >> 8, crc & 0xFF])
+    good = p.encode_reply(b"d\x01\x08\x79\x18\x00\x00\x00")
+    port = ScriptedPort([bytes(bad), good])
+    k = Katana(port, timeout=0.05, retries=1)
+    assert k.read(3) == p.MotorReading(True, p.MSF_DESPOS, 31000, 0, 0)
+    assert port.written == [p.encode_request(p.read_motor(3))] * 2 and k.retried == 1
+
+
+def test_an_error_flag_to_a_3_byte_reply_is_the_refusal():
+    """'Z' is answered in 3 bytes: there the bare error flag is the whole reply, and KNI asks why."""
+    port = ScriptedPort([p.encode_error_flag()])
+    with pytest.raises(p.FirmwareError, match=r"refused command 'D': not now \(axis 2\) \(firmware error 3\)"):
+        Katana(port, timeout=0.05, retries=1).echo()
+    assert port.written == [p.encode_request(p.echo()), p.ERROR_REQUEST]
 
 
 def test_a_silent_controller_is_tried_again_then_given_up(line):

@@ -123,3 +123,48 @@ def test_the_gripper_opens_and_closes_within_its_angles():
     assert gripper_opening(gripper_counts(0.0, top), top) == pytest.approx(0.0, abs=1e-4)
     assert gripper_opening(gripper_counts(0.03, top), top) == pytest.approx(0.03, abs=1e-4)
     assert math.isclose(gripper_counts(top, top), 30244, abs_tol=2)   # KNI_GRIPPER_OPEN_ANGLE's counts
+
+
+# ---------------------------------------------------------------- what KNI sets around the stopper search
+@pytest.mark.parametrize("payload, kni", [
+    # kmlMotBase.cpp: setControllerParameters 'S' <motor> 1 <kspeed> <kpos> <kI>
+    (p.set_controller_parameters(2, 7, 2, 100), bytes([ord("S"), 2, 1, 7, 2, 100])),
+    # setPwmLimits 'S' <motor> 2 <maxppwm> <maxnpwm> 0
+    (p.set_pwm_limits(1, 100, 100), bytes([ord("S"), 1, 2, 100, 100, 0])),
+    # setSpeedLimits 'S' <motor> 3 <positive> <negative> 0
+    (p.set_speed_limits(3, 25, 25), bytes([ord("S"), 3, 3, 25, 25, 0])),
+    # setAccelerationLimit 'S' <motor> 4 <acceleration> 0 0
+    (p.set_acceleration_limit(4, 1), bytes([ord("S"), 4, 4, 1, 0, 0])),
+    # setCrashLimit 'S' <motor> 5 <limit hi> <limit lo> 0; 800 = 0x0320
+    (p.set_crash_limit(5, 800), bytes([ord("S"), 5, 5, 0x03, 0x20, 0])),
+    # setCrashLimitLinear 'S' <motor> 6 <limit hi> <limit lo> 0
+    (p.set_crash_limit_linear(6, 800), bytes([ord("S"), 6, 6, 0x03, 0x20, 0])),
+    # kmlBase.cpp disableCrashLimits 'A' 0 0; enableCrashLimits 'A' 0 1 on every Katana
+    (p.collision_detection(False), b"A\x00\x00"),
+    (p.collision_detection(True), b"A\x00\x01"),
+    # recvSFW 'V' <motor> 32
+    (p.slave_firmware(3), b"V\x03\x20"),
+])
+def test_the_new_commands_are_kni_s_bytes_and_sizes(payload, kni):
+    assert payload == kni
+    assert p.decode_request(p.encode_request(payload)) == (p.ADDRESS, kni)
+
+
+def test_limits_that_do_not_fit_their_bytes_are_refused():
+    with pytest.raises(p.ProtocolError, match=r"PWM limits are one byte each \(0..255\), not 300, 100"):
+        p.set_pwm_limits(1, 300, 100)
+    with pytest.raises(p.ProtocolError, match="a crash limit is two bytes"):
+        p.set_crash_limit(1, 70000)
+
+
+def test_the_slave_firmware_is_bytes_3_to_7_of_v():
+    reply = b"v\x01\x03\x01\x05\x09\x00\x02" + bytes(5)
+    assert p.parse_slave_firmware(reply) == p.SlaveFirmware(1, 5, 9, 0, 2)
+    assert str(p.parse_slave_firmware(reply)) == "1.5.9"
+    assert p.parse_slave_firmware(b"v\x00" + bytes(11)) is None     # the motor said "not ok"
+
+
+def test_the_error_reply_is_the_flag_at_the_command_s_reply_length():
+    frame = p.encode_error_reply(ord("N"))
+    assert len(frame) == p.reply_length(ord("N")) == 15 and p.check_crc(frame) == b"\xc0" + bytes(12)
+    assert p.encode_error_reply(ord("Z")) == p.encode_error_flag()      # 'z' is 1 byte: the same 3 bytes

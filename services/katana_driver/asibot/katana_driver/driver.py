@@ -20,7 +20,8 @@ import time
 from typing import Callable
 
 from asibot.katana_driver import protocol as p
-from asibot.katana_driver.katana import Interrupted, Katana, MotorParams, Silent, gripper_counts, gripper_opening
+from asibot.katana_driver.katana import (FIRMWARE_DEPENDENT_MOTOR, Interrupted, Katana, MotorParams, Silent,
+                                         UnsupportedController, gripper_counts, gripper_opening)
 from asibot.messages import ArmState, GripperState
 from asibot.robots import RobotSpec
 from asibot.safety.guarded_arm import EventSink, FaultError, GuardedArm
@@ -161,6 +162,8 @@ class KatanaDriver(GuardedArm):
             self._enter_fault("startup", "The Katana's calibration was interrupted by the emergency stop: "
                               "every motor holds where it stands; release it, then call reset_fault to "
                               "calibrate again.")
+        except UnsupportedController as exc:
+            self._enter_fault("startup", str(exc))
         except (Silent, p.ProtocolError, p.FirmwareError, OSError) as exc:
             self._enter_fault("startup", self._sentence(exc, "starting"))
         self._ticker = Ticker(1.0 / self.period, self._stop)
@@ -173,8 +176,10 @@ class KatanaDriver(GuardedArm):
                                   "see its log, then call reset_fault.")
 
     def _bring_up(self) -> None:
-        version, revision = self.katana.firmware()
-        log.info("Katana master firmware %d.%d", version, revision)
+        """KNI's order: the firmware asked (motor 3's counts per turn follow from it), then the
+        calibration with collision detection off and each motor's search limits around its
+        stopper search, then every motor's working limits and collision detection on."""
+        self._identify()
         if self.calibrate_first:
             log.info("calibrating: every motor searches its mechanical stopper")
             with self._lock:
@@ -184,6 +189,23 @@ class KatanaDriver(GuardedArm):
             self.katana.calibrate(stop=self._abort_calibration)
         self._hold_here(self.katana.start())
         log.info("the Katana holds its position; motion commands are obeyed from now on")
+
+    def _identify(self) -> None:
+        joint = self.names[FIRMWARE_DEPENDENT_MOTOR - 1]
+        identity = self.katana.identify(joint)
+        log.info("Katana master firmware %d.%d, slave firmware %s", *identity.master,
+                 ", ".join(f"motor {m.motor} {s if s is not None else '?'}"
+                           for m, s in zip(self.katana.motors, identity.slaves)))
+        with self._lock:
+            self.joints = list(self.katana.motors[:self.n])
+            self.gripper = self.katana.motors[self.n]
+            for i, j in enumerate(self.joints):
+                lo, hi = j.within_counter(self.spec.lower[i], self.spec.upper[i])
+                if (lo, hi) != (self.spec.lower[i], self.spec.upper[i]):
+                    log.warning("joint %s: %d counts per turn put part of its range beyond the 16-bit "
+                                "positions of the line; it is driven within %.4f..%.4f rad", self.names[i],
+                                j.encoders_per_cycle, lo, hi)
+                self.lower[i], self.upper[i] = lo, hi
 
     def _hold_here(self, counts: list[int]) -> None:
         """The motors stand at `counts` and hold: the set-point is where they are, no fault."""
@@ -312,6 +334,8 @@ class KatanaDriver(GuardedArm):
             log.exception("publishing the arm state failed")
 
     def _reset_failed(self, exc: Exception) -> FaultError | None:
+        if isinstance(exc, UnsupportedController):
+            return FaultError(str(exc))
         if isinstance(exc, Interrupted):
             return FaultError("The calibration was interrupted by the emergency stop; release it, then call "
                               "reset_fault again.")

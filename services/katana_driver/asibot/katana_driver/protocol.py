@@ -1,15 +1,18 @@
 """The Katana's serial protocol, as KNI 4.3.0 documents it: frames, CRC, encode and decode.
 
 Pure functions, no I/O. Every number here is a fact of docs/katana.md, "The serial protocol",
-which names its source (file and line of KNI 4.3.0 in uos/katana_driver); the code is written
+or names its KNI 4.3.0 source file (in uos/katana_driver, kni/KNI_4.3.0/); the code is written
 from those facts, not from KNI's.
 
 A request is `01 <address> <n> <payload: n bytes> <crc hi> <crc lo>`; the CRC covers the payload
 only. The reply is `<payload: the command's reply size> <crc hi> <crc lo>`, its first byte the
 command letter in lower case, the CRC over the reply payload. A controller that refuses a
-command answers the 3 bytes `C0 <crc>` instead (the error flag); the reason is then asked
-with the 4 raw bytes `00 00 00 C1` and comes back as 57 bytes: `C1 <last command> <error code>
-<axis> <text, NUL-terminated>`, 55 in all, and the CRC.
+command answers with the error flag C0 as the first byte instead. KNI's reader (cdlCOM.cpp
+recv, cplSerial.cpp recv) reads an error reply only at the command's full reply length: fewer
+bytes, a bare `C0 <crc>` among them, are an incomplete reply and the request is sent again; a
+wrong CRC is sent again too. Only then is the reason asked, with the 4 raw bytes `00 00 00 C1`,
+and it comes back as 57 bytes: `C1 <last command> <error code> <axis> <text, NUL-terminated>`,
+55 in all, and the CRC.
 """
 
 from __future__ import annotations
@@ -51,8 +54,23 @@ STATUS_NAMES = {MSF_MECHSTOP: "MSF_MECHSTOP", MSF_MAXPOS: "MSF_MAXPOS", MSF_MINP
                 MSF_NLINMOV: "MSF_NLINMOV", MSF_LINMOV: "MSF_LINMOV", MSF_NOTVALID: "MSF_NOTVALID"}
 # 'N' subcommands: every motor's status flag, every motor's position.
 ALL_STATUS, ALL_POSITIONS = 1, 3
-# 'S' subcommands used here.
-S_SPEED_LIMITS = 3
+# 'S' subcommands (kmlMotBase.cpp: setControllerParameters, setPwmLimits, setSpeedLimits,
+# setAccelerationLimit, setCrashLimit, setCrashLimitLinear).
+S_CONTROLLER_PARAMETERS, S_PWM_LIMITS, S_SPEED_LIMITS, S_ACCELERATION_LIMIT = 1, 2, 3, 4
+S_CRASH_LIMIT, S_CRASH_LIMIT_LINEAR = 5, 6
+#: 'V' with this second byte reads a motor's slave firmware (kmlMotBase.cpp recvSFW).
+V_SLAVE_FIRMWARE = 32
+#: A slave of this controller type takes no PWM limits: KNI skips 'S' 2 for it ("can not set
+#: pwm limit on current controller", kmlMotBase.cpp setPwmLimits).
+CURRENT_CONTROLLER = 1
+#: 'A' <master> <slave>: collision detection. KNI switches it off with `A 0 0`
+#: (kmlBase.cpp disableCrashLimits) and on with `A <motor> 1`, where motor would be 1 on a
+#: Katana 300 ("master ON with KatHD300") but is 0 on every Katana: the test that picks it,
+#: `if (checkKatanaType(400))`, is true for both of checkKatanaType's answers, 1 and -1
+#: (kmlBase.cpp enableCrashLimits, checkKatanaType). `A 0 1` is what the ROS driver has sent
+#: to every Katana it calibrated (katana/src/Katana.cpp calibrate), so it is what is sent here.
+COLLISION_DETECTION_OFF = (0, 0)
+COLLISION_DETECTION_ON = (0, 1)
 #: 'C' with motor number + 128 sets the actual position (the counter) instead of the target.
 ACTUAL_POSITION = 128
 #: Motors of a six-motor Katana (5 joints and the gripper), numbered 1..6 on the line.
@@ -150,7 +168,16 @@ def encode_reply(payload: bytes) -> bytes:
 
 
 def encode_error_flag() -> bytes:
+    """The bare 3-byte error flag `C0 <crc>` (what KNI's assert in cplSerial.cpp recv expects,
+    and what its reader cannot read for a command whose reply is longer)."""
     return _with_crc(bytes([ERROR_FLAG]))
+
+
+def encode_error_reply(command: int) -> bytes:
+    """The error flag at the length of `command`'s reply: C0, zeros, the CRC over all of them.
+    The only form of refusal KNI's reader takes for a command whose reply is longer than 3
+    bytes (cdlCOM.cpp recv throws on fewer bytes before the flag is looked at)."""
+    return _with_crc(bytes([ERROR_FLAG]).ljust(sizes(command)[1], b"\0"))
 
 
 def encode_error_message(command: int, code: int, axis: int, text: str) -> bytes:
@@ -169,7 +196,8 @@ def check_crc(frame: bytes) -> bytes:
 
 
 def is_error_flag(frame: bytes) -> bool:
-    return len(frame) >= 3 and frame[0] == ERROR_FLAG
+    """Whether `frame` starts with the error flag (its length and CRC not checked here)."""
+    return len(frame) >= 1 and frame[0] == ERROR_FLAG
 
 
 def decode_reply(command: int, frame: bytes) -> bytes:
@@ -235,11 +263,59 @@ def read_all(subcommand: int) -> bytes:
     return bytes([ord("N"), subcommand, 0])
 
 
+def _bytes(what: str, *values: int) -> bytes:
+    if not all(0 <= v <= 255 for v in values):
+        raise ProtocolError(f"{what} are one byte each (0..255), not {', '.join(map(str, values))}")
+    return bytes(values)
+
+
 def set_speed_limits(motor: int, positive: int, negative: int) -> bytes:
     """'S' 3: `motor`'s speed limits, encoder counts per 10 ms, each 0..255."""
-    if not (0 <= positive <= 255 and 0 <= negative <= 255):
-        raise ProtocolError("speed limits are one byte each")
-    return bytes([ord("S"), motor, S_SPEED_LIMITS, positive, negative, 0])
+    return bytes([ord("S"), motor, S_SPEED_LIMITS]) + _bytes("speed limits", positive, negative) + b"\0"
+
+
+def set_controller_parameters(motor: int, k_speed: int, k_pos: int, k_i: int) -> bytes:
+    """'S' 1: `motor`'s controller gains: speed, position, integral (kmlMotBase.cpp
+    setControllerParameters; the configuration's kspeed_nmp, kpos_nmp, kI_nmp)."""
+    return bytes([ord("S"), motor, S_CONTROLLER_PARAMETERS]) + _bytes("controller gains", k_speed, k_pos, k_i)
+
+
+def set_pwm_limits(motor: int, positive: int, negative: int) -> bytes:
+    """'S' 2: `motor`'s largest PWM either way (kmlMotBase.cpp setPwmLimits; maxppwm_nmp, maxnpwm_nmp)."""
+    return bytes([ord("S"), motor, S_PWM_LIMITS]) + _bytes("PWM limits", positive, negative) + b"\0"
+
+
+def set_acceleration_limit(motor: int, acceleration: int) -> bytes:
+    """'S' 4: `motor`'s acceleration limit (kmlMotBase.cpp setAccelerationLimit; maxaccel_nmp)."""
+    return bytes([ord("S"), motor, S_ACCELERATION_LIMIT]) + _bytes("acceleration limits", acceleration) + b"\0\0"
+
+
+def _crash_limit(motor: int, subcommand: int, limit: int) -> bytes:
+    if not 0 <= limit <= 0xFFFF:
+        raise ProtocolError(f"a crash limit is two bytes (0..65535 counts), not {limit}")
+    return bytes([ord("S"), motor, subcommand]) + limit.to_bytes(2, "big") + b"\0"
+
+
+def set_crash_limit(motor: int, limit: int) -> bytes:
+    """'S' 5: how far (counts) `motor` may lag its set-point before it reports a collision
+    (kmlMotBase.cpp setCrashLimit; crash_limit_nmp), high byte first."""
+    return _crash_limit(motor, S_CRASH_LIMIT, limit)
+
+
+def set_crash_limit_linear(motor: int, limit: int) -> bytes:
+    """'S' 6: the same in linear movements (kmlMotBase.cpp setCrashLimitLinear; crash_limit_lin_nmp)."""
+    return _crash_limit(motor, S_CRASH_LIMIT_LINEAR, limit)
+
+
+def collision_detection(on: bool) -> bytes:
+    """'A': collision detection on or off, as KNI sends it (COLLISION_DETECTION_ON/OFF)."""
+    master, slave = COLLISION_DETECTION_ON if on else COLLISION_DETECTION_OFF
+    return bytes([ord("A"), master, slave])
+
+
+def slave_firmware(motor: int) -> bytes:
+    """'V' <motor> 32: `motor`'s slave firmware (kmlMotBase.cpp recvSFW)."""
+    return bytes([ord("V"), motor, V_SLAVE_FIRMWARE])
 
 
 @dataclass(frozen=True)
@@ -268,7 +344,31 @@ def parse_statuses(payload: bytes, motors: int = MOTORS) -> list[int]:
 
 
 def parse_firmware(payload: bytes) -> tuple[int, int]:
+    """The master firmware's (version, revision) from 'b' (kmlBase.cpp recvMFW)."""
     return payload[1], payload[2]
+
+
+@dataclass(frozen=True)
+class SlaveFirmware:
+    """One motor's slave firmware, as 'v' says it (kmlMotBase.h TMotSFW)."""
+
+    version: int
+    subversion: int
+    revision: int
+    type: int           # the controller type; CURRENT_CONTROLLER takes no PWM limits
+    subtype: int
+
+    def __str__(self) -> str:
+        return f"{self.version}.{self.subversion}.{self.revision}"
+
+
+def parse_slave_firmware(payload: bytes) -> SlaveFirmware | None:
+    """The slave firmware in a 'v' reply: bytes 3..7 (kmlMotBase.cpp recvSFW); None when byte 1,
+    the motor's "ok", is 0 (KNI then gives up reading it and takes controller type 0,
+    kmlMotBase.cpp init)."""
+    if not payload[1]:
+        return None
+    return SlaveFirmware(*payload[3:8])
 
 
 def status_name(flag: int) -> str:
