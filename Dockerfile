@@ -11,7 +11,9 @@ ARG NODE=node:22-bookworm-slim@sha256:43ac6c60b8f89723f746e8a92ce91abd5017e627ce
 # ---- the web page's npm packages, pinned in package-lock.json, bundled once (as ./bootstrap does)
 FROM ${NODE} AS web
 WORKDIR /web
-COPY docker/ /tmp/docker/
+# Only what the downloads need from docker/ (a change to the rest rebuilds no download): the
+# proxy's CA when there is one (the [t]: a pattern that may match nothing, beside a file that is there).
+COPY docker/make-local-bases docker/extra-ca.cr[t] /tmp/docker/
 COPY services/web/frontend/package.json services/web/frontend/package-lock.json services/web/frontend/build.mjs ./frontend/
 COPY services/web/frontend/entries ./frontend/entries
 # docker/extra-ca.crt: a download proxy's certificate authority, used here and never kept.
@@ -21,7 +23,7 @@ RUN if [ -f /tmp/docker/extra-ca.crt ]; then export NODE_EXTRA_CA_CERTS=/tmp/doc
 
 # ---- the Python packages, from the lock file, into a virtual environment copied below whole
 FROM ${BASE} AS python
-COPY docker/ /tmp/docker/
+COPY docker/make-local-bases docker/extra-ca.cr[t] /tmp/docker/
 COPY requirements/build.txt requirements/runtime.txt /tmp/requirements/
 RUN apt-get update \
  && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends python3 python3-venv ca-certificates \
@@ -64,9 +66,12 @@ ENV PATH=/opt/asibot/bin:$PATH \
     ASIBOT_DATA=/data
 WORKDIR /app
 USER asibot
-# Recordings and user data live in volumes, never in the image; both 0700, as a new named
-# volume copies them (recordings hold the page's microphone audio and the camera pictures).
-VOLUME ["/app/recordings", "/data"]
+# Recordings and user data live outside the image: compose.yaml binds the checkout's recordings/
+# and the named volume asibot-data at /data, which copies this 0700 /data on first use. No VOLUME
+# line: it gave every container an anonymous volume for each path (18 in the sim profile), left
+# behind by every `docker compose down` (docs/docker.md).
 CMD ["asibot", "--help"]
+# The recorder's entrypoint and every service's healthcheck (compose.yaml).
+COPY docker/bin/ /usr/local/bin/
 # Last: the one layer a change of our code rebuilds (the settings above are cached).
 COPY --from=python /opt/asibot /opt/asibot

@@ -154,3 +154,22 @@ def test_status_json_gives_each_service_its_restart_count(memory_bus, capsys):
     assert nav["restarts"] == 3 and nav["launched_as"] == "nav-cli-base"
     assert status["launched"] == [{"name": "nav-cli-base", "pid": 4242, "restarts": 3, "running": True}]
     assert any(s["service"] == "launcher" for s in status["services"])
+
+
+def test_nav_names_the_robot_that_is_there_when_the_default_is_not(memory_bus, monkeypatch, capsys):
+    """The emulated profile runs `pioneer`, not the default `pioneer-sim`: the refusal names it."""
+    monkeypatch.delenv("ASIBOT_ROBOT", raising=False)
+    with Bus("nav") as there:
+        there.announce(keys.service("nav", "pioneer"))
+        assert asibot(["nav", "goto", "fridge"]) == 2
+    said = capsys.readouterr().err.strip()
+    assert said == ("asibot nav: No nav service answers for 'pioneer-sim' (the default robot); nav runs for "
+                    "'pioneer': `asibot nav --robot pioneer goto ...`, or set ASIBOT_ROBOT."), said
+
+
+def test_up_says_what_each_profile_runs():
+    r = run("up", "--help")
+    assert r.returncode == 0, r.stderr
+    text = " ".join(r.stdout.split())
+    for profile in ("sim", "emulated", "real"):
+        assert f"{profile}:" in text, text

@@ -8,8 +8,10 @@ by a marker in their command line (inside the sandbox pids are its own namespace
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import socket
+import textwrap
 import threading
 import uuid
 from pathlib import Path
@@ -18,9 +20,11 @@ import pytest
 
 from asibot import access, keys, messages
 from asibot.bus import Bus, open_router
-from asibot.testing import ESCAPING_PROGRAM, free_port, processes_with, wait_until
+from asibot.errors import RpcError
+from asibot.web import sandbox as sandbox_module
+from asibot.testing import ATTEMPTS, ESCAPING_PROGRAM, free_port, processes_with, wait_until
 from asibot.web.runner import Limits, ProgramRunner, RunResult
-from asibot.web.sandbox import ACCESS_INSIDE, NOBODY, Sandbox, probe
+from asibot.web.sandbox import ACCESS_INSIDE, NOBODY, UNCONFINED_ENV, Features, Sandbox, probe
 
 from .test_runner import program
 
@@ -160,14 +164,8 @@ def test_a_program_writes_only_its_scratch_reads_no_secret_and_listens_nowhere(m
     listener = socket.create_server(("127.0.0.1", 0))   # a service of the robot PC, not the bus
     try:
         r = make(env={"ASIBOT_ROUTER": f"tcp/127.0.0.1:{free_port()}"}, access=secrets_folder)
-        path = program(folder, f"""
+        path = program(folder, ATTEMPTS + textwrap.dedent(f"""
             import os, socket
-            def attempt(name, fn):
-                try:
-                    fn()
-                    print(name, "allowed")
-                except OSError:
-                    print(name, "refused")
             def listen():
                 s = socket.socket()
                 s.bind(("0.0.0.0", 0))
@@ -184,7 +182,7 @@ def test_a_program_writes_only_its_scratch_reads_no_secret_and_listens_nowhere(m
             attempt("listen", listen)
             attempt("connect elsewhere", lambda: socket.create_connection(("127.0.0.1", {listener.getsockname()[1]}), timeout=5))
             print("uid", os.getuid())
-        """)
+        """))
         result = r.run(path)
     finally:
         listener.close()
@@ -290,6 +288,60 @@ def test_what_a_bare_machine_gets_is_said():
     assert "missing" not in full, full   # this machine (and CI) has every wall
 
 
+@pytest.fixture
+def no_bubblewrap(monkeypatch):
+    """A machine where bubblewrap is wanted but cannot make a sandbox (Docker's default profile)."""
+    monkeypatch.setattr(sandbox_module, "probe", lambda *a: Features(None, False, 0, None, frozenset(), {}))
+    monkeypatch.delenv(UNCONFINED_ENV, raising=False)
+
+
+def test_a_program_is_refused_where_bubblewrap_cannot_work_unless_the_deployment_says_so(
+        make, tmp_path, no_bubblewrap, monkeypatch):
+    path = program(tmp_path, "print('ran')\n")
+    r = make()
+    assert r.runner.sandbox.confinement()["runs"] is False
+    with pytest.raises(RpcError, match=f"Programs cannot run here: bubblewrap .*{UNCONFINED_ENV}=1") as refused:
+        r.runner.start(path, ROBOT)
+    assert refused.value.code == "not_allowed" and not r.runner.running()
+    monkeypatch.setenv(UNCONFINED_ENV, "1")
+    allowed = make()
+    said = allowed.runner.sandbox.confinement()
+    assert (said["runs"], said["confined"]) == (True, False) and UNCONFINED_ENV in said["text"]
+    result = allowed.run(path)
+    assert result.ok and allowed.out() == ["ran"], (result.reason, allowed.runner.output())
+
+
+def test_the_page_is_told_which_walls_programs_get():
+    said = Sandbox().confinement()
+    assert (said["runs"], said["confined"]) == (True, True)
+    assert said["text"].startswith("Programs run confined: bubblewrap, no network but the bus,"), said
+
+
+def test_a_program_of_a_users_own_server_sees_no_subfolder_of_its_folder(make, tmp_path, monkeypatch):
+    """The image's web runs as a user, its folder /data: the AsTeRICS bridge's HTTP token lives
+    in asterics/ there, nav's maps in nav/; the program reads its own top-level files only."""
+    real = probe()
+    # The user's own server (root's copies the folder's top-level files for nobody instead).
+    monkeypatch.setattr(sandbox_module, "probe", lambda *a: dataclasses.replace(real, as_nobody=False))
+    folder = tmp_path / "user"
+    (folder / "asterics").mkdir(parents=True)
+    (folder / "asterics" / "token").write_text("bridge token\n")
+    (folder / "points.ini").write_text("[points]\n")
+    r = make()
+    path = program(folder, """
+        import os
+        for name in ("points.ini", "asterics/token"):
+            try:
+                print(name, open(name).read().strip())
+            except OSError:
+                print(name, "refused")
+        print(sorted(os.listdir("asterics")))
+    """)
+    result = r.run(path)
+    assert result.ok, (result.reason, r.runner.output())
+    assert r.out() == ["points.ini [points]", "asterics/token refused", "[]"]
+
+
 def test_the_program_role_may_call_kinematics_and_nav_and_nothing_else():
     may = access.may
     assert may("program", "query", keys.cart_rpc(ROBOT, "movl"))
@@ -316,20 +368,14 @@ def test_without_bubblewrap_roots_server_still_runs_programs_as_nobody(make, tmp
     folder = tmp_path / "user"
     (folder / "points.ini").parent.mkdir(parents=True)
     (folder / "points.ini").write_text("[points]\n")
-    path = program(folder, """
+    path = program(folder, ATTEMPTS + textwrap.dedent("""
         import os
-        def attempt(name, fn):
-            try:
-                fn()
-                print(name, "allowed")
-            except OSError:
-                print(name, "refused")
         print("uid", os.getuid())
         attempt("read /etc/shadow", lambda: open("/etc/shadow").read())
         attempt("read its points", lambda: open("points.ini").read())
         attempt("write its points", lambda: open("points.ini", "a"))
         print(undefined)
-    """)
+    """).lstrip("\n"))
     result = r.run(path)
     assert r.out() == [f"uid {NOBODY}", "read /etc/shadow refused", "read its points allowed",
                        "write its points refused"]

@@ -90,6 +90,17 @@ PRETEND_GPU = """(() => {
 })();"""
 
 
+#: The start of a program that tries what a confined program must not do, each wall once:
+#: `attempt(name, fn)` prints "NAME allowed", or "NAME refused" when fn raises OSError.
+ATTEMPTS = """
+def attempt(name, fn):
+    try:
+        fn()
+        print(name, "allowed")
+    except OSError:
+        print(name, "refused")
+"""
+
 #: A program that escapes its process group two ways, a child that calls setsid() and a daemon
 #: (double fork, setsid, orphaned), both marked with `{marker}` in their command lines; it says
 #: "both up" once both run, then runs `{then}`. What the sandbox's Stop must end.

@@ -507,7 +507,10 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
 
     up = sub.add_parser("up", help="start the router and a profile's services as local processes")
-    up.add_argument("--profile", default="sim", choices=["sim", "emulated", "real"])
+    up.add_argument("--profile", default="sim", choices=["sim", "emulated", "real"],
+                    help="which robots: sim: both MuJoCo worlds (asibot-sim, pioneer-sim; the default); "
+                         "emulated: the real drivers against wire-level emulators (asibot, pioneer); "
+                         "real: the real drivers on hardware (ASIBOT_ARM_CAN, ASIBOT_PIONEER_PORT)")
     up.add_argument("--only", nargs="+", metavar="NAME", help="start only these services (and their dependencies)")
     up.add_argument("--file", help="compose file (default: compose.yaml in this folder or a parent)")
     up.add_argument("--access", action=argparse.BooleanOptionalAction, default=None,

@@ -20,8 +20,10 @@ import math
 import os
 from typing import Callable, Sequence
 
-from asibot import driving
+from asibot import driving, keys
+from asibot.bus import Bus
 from asibot.client import NavClient
+from asibot.errors import AsibotError, RpcError
 
 DEFAULT_ROBOT = "pioneer-sim"
 
@@ -71,45 +73,72 @@ def _wait_or_stop(robot: str, wait: Callable[[], dict], stop: Callable[[], objec
 
 
 def cmd_nav(args: argparse.Namespace) -> int:
-    robot = args.robot or os.environ.get("ASIBOT_ROBOT") or DEFAULT_ROBOT
-    with NavClient(robot) as base:
-        verb = args.verb
-        if verb == "goto":
-            gid = base.goto(args.target)
-            if args.no_wait:
-                print(f"{robot}: goal {gid} started")
-                return 0
-            _wait_or_stop(robot, lambda: base.wait(gid), lambda: base.cancel(gid))
-        elif verb in ("drive", "turn", "primitive"):
-            call = {"drive": lambda: base.drive(args.amount), "turn": lambda: base.turn(args.amount),
-                    "primitive": lambda: base.primitive(args.name)}[verb]
-            print(f"{robot}: {call()}")
-            if not args.no_wait:
-                _wait_or_stop(robot, base.wait, base.stop)
-        elif verb == "stop":
-            base.stop()
-            print(f"{robot}: stopped")
-        elif verb == "cancel":
-            print(f"{robot}: {base.cancel()['text']}")
-        elif verb == "status":
-            print(f"{robot}: {_show(base.status())}")
-        elif verb == "places":
-            for name, (x, y, th) in base.places().items():
-                print(f"{name:24s} x {x:6.2f}  y {y:6.2f}  theta {math.degrees(th):4.0f} degrees")
-        elif verb == "save-place":
-            pose = base.save_place(args.name, replace=args.replace)
-            print(f"{robot}: saved {args.name!r} at {_pose(pose)}")
-        elif verb == "rename-place":
-            base.rename_place(args.name, args.new_name)
-            print(f"{robot}: {args.name!r} is now {args.new_name!r}")
-        elif verb == "remove-place":
-            base.remove_place(args.name)
-            print(f"{robot}: {args.name!r} removed")
-        elif verb == "map":
-            if args.action == "save":
-                print(f"{robot}: {base.map_save(args.name, use=args.use)['text']}")
-            else:
-                print(f"{robot}: {base.map_start() if args.action == 'start' else base.map_stop()}")
+    chosen = args.robot or os.environ.get("ASIBOT_ROBOT")
+    robot = chosen or DEFAULT_ROBOT
+    try:
+        base = NavClient(robot)
+    except RpcError as exc:
+        there = [] if chosen or exc.code != "unavailable" else _nav_robots()
+        if not there or robot in there:
+            raise
+        # The default robot is absent (the emulated and real profiles run `pioneer`): name the
+        # mobile robots whose nav is there, so that the next command is the right one.
+        again = " or ".join(f"`asibot nav --robot {r} {args.verb} ...`" for r in there)
+        raise RpcError("unavailable", f"No nav service answers for {robot!r} (the default robot); nav runs "
+                                      f"for {', '.join(map(repr, there))}: {again}, or set ASIBOT_ROBOT.") from None
+    with base:
+        return _nav(args, robot, base)
+
+
+def _nav_robots() -> list[str]:
+    """The robots whose nav service is alive on the bus (none when the bus cannot be reached)."""
+    try:
+        with Bus("nav", wait=2.0) as bus:
+            alive = bus.alive(keys.ALL_SERVICES)
+    except AsibotError:
+        return []
+    return sorted({instance for service, instance in map(keys.parse_service, alive) if service == "nav"})
+
+
+def _nav(args: argparse.Namespace, robot: str, base: NavClient) -> int:
+    """The verb, on a robot whose nav answers."""
+    verb = args.verb
+    if verb == "goto":
+        gid = base.goto(args.target)
+        if args.no_wait:
+            print(f"{robot}: goal {gid} started")
+            return 0
+        _wait_or_stop(robot, lambda: base.wait(gid), lambda: base.cancel(gid))
+    elif verb in ("drive", "turn", "primitive"):
+        call = {"drive": lambda: base.drive(args.amount), "turn": lambda: base.turn(args.amount),
+                "primitive": lambda: base.primitive(args.name)}[verb]
+        print(f"{robot}: {call()}")
+        if not args.no_wait:
+            _wait_or_stop(robot, base.wait, base.stop)
+    elif verb == "stop":
+        base.stop()
+        print(f"{robot}: stopped")
+    elif verb == "cancel":
+        print(f"{robot}: {base.cancel()['text']}")
+    elif verb == "status":
+        print(f"{robot}: {_show(base.status())}")
+    elif verb == "places":
+        for name, (x, y, th) in base.places().items():
+            print(f"{name:24s} x {x:6.2f}  y {y:6.2f}  theta {math.degrees(th):4.0f} degrees")
+    elif verb == "save-place":
+        pose = base.save_place(args.name, replace=args.replace)
+        print(f"{robot}: saved {args.name!r} at {_pose(pose)}")
+    elif verb == "rename-place":
+        base.rename_place(args.name, args.new_name)
+        print(f"{robot}: {args.name!r} is now {args.new_name!r}")
+    elif verb == "remove-place":
+        base.remove_place(args.name)
+        print(f"{robot}: {args.name!r} removed")
+    elif verb == "map":
+        if args.action == "save":
+            print(f"{robot}: {base.map_save(args.name, use=args.use)['text']}")
+        else:
+            print(f"{robot}: {base.map_start() if args.action == 'start' else base.map_stop()}")
     return 0
 
 

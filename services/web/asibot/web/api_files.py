@@ -228,10 +228,11 @@ async def stop_program(request: Request) -> dict:
     return web.runner.status()
 
 
-@router.get("/run", summary="the running (or last) program and its output")
+@router.get("/run", summary="the running (or last) program, its output, and the walls programs run in here")
 def run_status(request: Request) -> dict:
     runner = web_of(request).runner
-    return {**runner.status(), "output": [list(o) for o in runner.output()]}
+    return {**runner.status(), "output": [list(o) for o in runner.output()],
+            "confinement": runner.sandbox.confinement()}
 
 
 # --- words -------------------------------------------------------------------------------------

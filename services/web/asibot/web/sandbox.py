@@ -54,6 +54,7 @@ from typing import Callable
 
 from asibot.access import PROGRAM_LINK, PROGRAM_ROUTER_ENV, program_endpoint, program_socket
 from asibot.bus import router_endpoint
+from asibot.errors import RpcError
 
 log = logging.getLogger(__name__)
 
@@ -69,6 +70,10 @@ ENV_ALLOWED = ("LANG", "LC_ALL", "LC_CTYPE", "TZ", "MUJOCO_GL", "ASIBOT_ROUTER")
 #: Names the server's own `env` may not pass on either.
 ENV_SECRET = re.compile(r"^ASIBOT_(ACCESS|ROLE)$|TOKEN|SECRET|PASSWORD|KEY", re.I)
 _CGROUP_PREFIX = "asibot-program-"
+#: Set to 1, programs run where bubblewrap cannot make a sandbox, with the weaker walls of
+#: docs/sandbox.md ("What each machine gives"); unset, they are refused there. A deployment
+#: says so knowingly: a program is text from a web page.
+UNCONFINED_ENV = "ASIBOT_PROGRAMS_UNCONFINED"
 #: Bigger files of the program's folder are left out of its copy (a program needs its
 #: points and modules, not a video someone put there).
 FOLDER_FILE_MAX = 16 << 20
@@ -271,17 +276,22 @@ def _bwrap_has(bwrap: str, option: str) -> bool:
         return False
 
 
-def _bwrap_works(bwrap: str, as_nobody: bool) -> bool:
-    """Whether a sandbox starts here at all (Docker's default seccomp refuses unshare and mount)."""
+def _bwrap_fails(bwrap: str, as_nobody: bool) -> str | None:
+    """Why a sandbox does not start here (bubblewrap's own words), or None when it does. Docker's
+    default seccomp profile refuses unshare and mount; its masks over /proc refuse a new proc."""
     sandbox = Sandbox.__new__(Sandbox)
     sandbox.features = Features(bwrap, as_nobody, 0, None, frozenset(), {})
     sandbox.access, sandbox.hide = None, ()
     argv = sandbox._bwrap_argv(Path("/"), [], None, 1 << 20) + ["/bin/true"]
     try:
-        return subprocess.run(argv, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                              stderr=subprocess.PIPE, timeout=10).returncode == 0
-    except (OSError, subprocess.TimeoutExpired):
-        return False
+        done = subprocess.run(argv, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                              stderr=subprocess.PIPE, timeout=10)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        return str(exc)
+    if done.returncode == 0:
+        return None
+    said = done.stderr.decode(errors="replace").strip().splitlines()
+    return said[-1] if said else f"exit status {done.returncode}"
 
 
 @functools.lru_cache(maxsize=None)
@@ -292,8 +302,11 @@ def probe(use_bwrap: bool = True, use_cgroups: bool = True, use_landlock: bool =
     if bwrap and as_nobody and not shutil.which("setpriv"):
         log.warning("setpriv (util-linux) is missing: programs would run as root; not using bubblewrap")
         bwrap = None
-    if bwrap and not _bwrap_works(bwrap, as_nobody):
-        log.warning("bubblewrap cannot make a sandbox here (no unshare/mount allowed?)")
+    why = _bwrap_fails(bwrap, as_nobody) if bwrap else None
+    if bwrap and why:
+        log.warning("bubblewrap cannot make a sandbox here (%s): programs are refused unless %s=1; in "
+                    "Docker the web service needs the security_opt of compose.yaml (docs/sandbox.md)",
+                    why, UNCONFINED_ENV)
         bwrap = None
     v2, v2c = _cgroup_v2() if use_cgroups else (None, frozenset())
     v1 = {c: p for c, p in _cgroup_v1().items() if c not in v2c} if use_cgroups else {}
@@ -635,6 +648,10 @@ class Sandbox:
         `programs`: where the router listens for programs (default: asibot.access.program_endpoint
         of this server's router), the program's only way to the bus."""
         self.features = probe(bwrap, cgroups, landlock)
+        # Without bubblewrap a program reads what the server reads and has the server's network
+        # (docs/sandbox.md): only a deployment that says so runs it. `bwrap=False` is the
+        # caller's own choice (the tests and benches of the other walls).
+        self.unconfined_allowed = not bwrap or os.environ.get(UNCONFINED_ENV, "") == "1"
         env_access = os.environ.get("ASIBOT_ACCESS")
         self.access = Path(access) if access else (Path(env_access) if env_access else None)
         self.hide = tuple(Path(h) for h in hide)
@@ -654,6 +671,29 @@ class Sandbox:
 
     def describe(self) -> str:
         return self.features.describe()
+
+    def confinement(self) -> dict:
+        """What the page says of programs here: whether they run (`runs`), in bubblewrap
+        (`confined`), and one sentence for the user (`text`), with what to do when they do not."""
+        f = self.features
+        if f.bwrap:
+            walls = ["bubblewrap", "no network but the bus", "read-only system and folder",
+                     "their own scratch /tmp", "user nobody" if f.as_nobody else "their own user namespace"]
+            if f.has("memory"):
+                walls.append("memory limit")
+            if f.has("pids"):
+                walls.append("process limit")
+            return {"runs": True, "confined": True, "text": "Programs run confined: " + ", ".join(walls) + "."}
+        if self.unconfined_allowed:
+            return {"runs": True, "confined": False,
+                    "text": f"Programs run without bubblewrap ({UNCONFINED_ENV}=1): they can read the web "
+                            "service's files and reach its network (docs/sandbox.md)."}
+        return {"runs": False, "confined": False, "text": self.refusal()}
+
+    def refusal(self) -> str:
+        return ("Programs cannot run here: bubblewrap cannot make a sandbox on this machine. Give it what "
+                "it needs (docs/sandbox.md: in Docker, the web service's security_opt in compose.yaml), or "
+                f"set {UNCONFINED_ENV}=1 for the web service to run programs without it knowingly.")
 
     def report(self) -> None:
         """Log what programs get, once (at the first run)."""
@@ -754,11 +794,16 @@ class Sandbox:
             if secret is not None and secret.is_dir() and secret.resolve() not in (Path("/"), folder):
                 argv += ["--tmpfs", str(secret.resolve())]
         argv += ["--ro-bind", str(folder_source or folder), str(folder)]
+        # Its hidden entries and its subfolders are hidden, as the copy for nobody leaves them out:
+        # .lan holds the page's token and key, asterics/ the bridge's HTTP token (the same folder
+        # in the image), nav/ the maps a program reaches through nav's verbs; .trash and .versions
+        # are not its business.
         try:
-            hidden = [] if folder_source else sorted(p for p in folder.iterdir() if p.name.startswith("."))
+            hidden = [] if folder_source or folder == Path("/") else sorted(   # "/": the probe's, no folder
+                p for p in folder.iterdir() if p.name.startswith(".") or (p.is_dir() and not p.is_symlink()))
         except OSError:
             hidden = []
-        for p in hidden:   # .lan holds the page's token and key; .trash, .versions are not its business
+        for p in hidden:
             argv += (["--tmpfs", str(p)] if p.is_dir() and not p.is_symlink() else ["--ro-bind", "/dev/null", str(p)])
         if credentials is not None:
             argv += ["--ro-bind", str(credentials), ACCESS_INSIDE]
@@ -788,8 +833,11 @@ class Sandbox:
     def prepare(self, python: str, path: Path, robot: str, server_env: dict[str, str], *,
                 memory_bytes: int, max_tasks: int, scratch_bytes: int,
                 rlimits: Callable[[], None]) -> Prepared:
-        """Everything for Popen to start `python -u path robot` in the sandbox, cwd its folder."""
+        """Everything for Popen to start `python -u path robot` in the sandbox, cwd its folder.
+        RpcError `not_allowed` where bubblewrap cannot work and nobody allowed running without it."""
         self.report()
+        if not self.features.bwrap and not self.unconfined_allowed:
+            raise RpcError("not_allowed", self.refusal())
         router = self.router_socket(server_env)
         f = self.features
         folder = path.parent

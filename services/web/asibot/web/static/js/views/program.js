@@ -65,9 +65,11 @@ let detailsCount = 0;   // ids of the Details a panel shows
 // however it was launched) and its `output` lines. A run that ended in a Python error: its
 // sentence ("Line 7: ..."), and its traceback under Details, which the server took out of the
 // output. `lineButton(last)`: a control that shows that line (the Program tab's editor), or null.
-export function outputPanel({ lineButton = () => null } = {}) {
+// `confinement`: also say which walls programs run in here, or why they cannot run (docs/sandbox.md).
+export function outputPanel({ lineButton = () => null, confinement = false } = {}) {
   const out = el('div', { class: 'output', role: 'log', 'aria-label': 'Program output', 'aria-live': 'polite' });
   const status = el('p', { role: 'status', class: 'big run-status' });
+  const walls = el('p', { class: 'muted confinement', hidden: !confinement });
   const failure = el('div', { class: 'run-error', 'aria-live': 'polite', hidden: true });
   let shownRun = null;   // `started` of the run whose output is shown
   let shownEnd = null;   // the last run's end, as shown
@@ -101,6 +103,7 @@ export function outputPanel({ lineButton = () => null } = {}) {
     showFailure(s.running ? null : s.last);
   };
   const reload = () => api.get(paths.run).then((s) => {
+    if (s.confinement) walls.textContent = s.confinement.text;
     shownRun = s.started;
     out.replaceChildren();
     s.output.forEach(([st, t]) => line(st, t));
@@ -118,7 +121,7 @@ export function outputPanel({ lineButton = () => null } = {}) {
   const clear = () => out.replaceChildren();
   // Draw the failure again (the Program tab opened another program: its line button may change).
   const redraw = () => showFailure(shownEnd);
-  return { node: el('div', {}, status, failure, out), clear, show, redraw, unmount: () => { off(); offFeed(); } };
+  return { node: el('div', {}, walls, status, failure, out), clear, show, redraw, unmount: () => { off(); offFeed(); } };
 }
 
 export function stopProgramButton() {
@@ -152,6 +155,7 @@ export default {
     const reference = referencePanel();
     // A failed run of the open program: a button that shows its line.
     const output = outputPanel({
+      confinement: true,
       lineButton: (last) => (last.line && last.program === current ? el('button', {
         type: 'button', onclick: () => { setMode('python'); goToLine(last.line, 1); },
       }, `Show line ${last.line}`) : null),
