@@ -49,6 +49,9 @@ MESSAGES_STAY = """() => { if (!localStorage.getItem('asibot.access'))
 #  2. The boxes that hold them (panels, rows, cards, the notice, the wizard): content spilling out.
 #  3. Every control (button, tab, button link, select, file input) at least 44 x 44 px.
 #  4. The page itself wider than the viewport (a sideways scroll).
+#  5. A control, message or status under the emergency stop's space (issues 52, 54): the stop has
+#     room of its own. One the page's scroll has put under it counts only if scrolling it into
+#     view (as a focus or the scanning ring does) leaves it there.
 MEASURE = r"""(where) => {
   const vw = document.documentElement.clientWidth;
   const found = [];
@@ -136,6 +139,24 @@ MEASURE = r"""(where) => {
     if (!shown(n)) continue;
     const r = n.getBoundingClientRect();
     if (r.width < 44 || r.height < 44) say(n, `a target of ${size(r)}, under 44 px`);
+  }
+  const stop = document.querySelector('.estop-box');
+  const over = (n) => {
+    const r = n.getBoundingClientRect();
+    return [...stop.children].filter(shown).some((c) => {
+      const b = c.getBoundingClientRect();
+      return r.left < b.right - 1 && r.right > b.left + 1 && r.top < b.bottom - 1 && r.bottom > b.top + 1;
+    }) || (() => { const b = stop.getBoundingClientRect();
+      return getComputedStyle(stop).backgroundColor !== 'rgba(0, 0, 0, 0)'
+        && r.left < b.right - 1 && r.right > b.left + 1 && r.top < b.bottom - 1 && r.bottom > b.top + 1; })();
+  };
+  const news = `${CONTROLS}, input, textarea, [role=status], [role=alert], .notice, .result, .now`;
+  const scrolled = [window.scrollX, window.scrollY];
+  for (const n of document.querySelectorAll(news)) {
+    if (!shown(n) || n.closest('.estop-box') || !over(n)) continue;
+    n.scrollIntoView({ block: 'nearest', inline: 'nearest', behavior: 'instant' });
+    if (over(n)) say(n, 'under the emergency stop (scrolled into view)');
+    window.scrollTo({ left: scrolled[0], top: scrolled[1], behavior: 'instant' });
   }
   const page = document.documentElement.scrollWidth;
   if (page > vw) {

@@ -444,6 +444,34 @@ def test_a_program_made_from_the_pick_template(api):
     assert "x" not in api.get("/api/programs").json()["programs"]
 
 
+def test_teaching_a_thing_again_asks_then_updates_the_same_program_and_its_task(api):
+    """Issue 52: re-teaching the red can updates the program its task runs (after asking), rather
+    than making pick_up_red_can_2 beside a task that still runs the old one."""
+    def made(thing, if_exists):
+        return api.post("/api/step-programs", json={"template": "pick_it_up", "thing": thing, "if_exists": if_exists})
+    first = made(THING, "ask")
+    assert first.status_code == 200 and first.json()["name"] == "pick_up_red_can" and not first.json()["replaced"]
+    r = api.put("/api/tasks/Give%20me%20the%20red%20can", json={"program": "pick_up_red_can", "words": [], "icon": "can.svg"})
+    assert r.status_code == 200, r.text
+    moved = {**THING, "where": [0.1, 0.45, 0.02]}
+    asked = made(moved, "ask")
+    sentence(asked, 409, "A program already picks up the red can: pick_up_red_can", "“Give me the red can”", "Update it")
+    assert asked.json()["error"] == "exists"
+    assert api.get("/api/programs").json()["programs"] == ["pick_up_red_can"]          # nothing made
+    assert "[0.0, 0.5, 0.02]" in api.get("/api/programs/pick_up_red_can").json()["text"]
+    updated = made(moved, "replace")
+    assert updated.status_code == 200, updated.text
+    body = updated.json()
+    assert body["name"] == "pick_up_red_can" and body["replaced"] and body["tasks"] == ["Give me the red can"]
+    assert "[0.1, 0.45, 0.02]" in api.get("/api/programs/pick_up_red_can").json()["text"]
+    assert [t["program"] for t in api.get("/api/tasks").json()["tasks"]] == ["pick_up_red_can"]
+    another = made(moved, "number")
+    assert another.json()["name"] == "pick_up_red_can_2" and not another.json()["replaced"]
+    bad = api.post("/api/step-programs", json={"template": "pick_it_up", "thing": THING, "if_exists": "overwrite"})
+    assert bad.status_code in (400, 422), bad.text
+    assert api.delete("/api/tasks/Give%20me%20the%20red%20can").status_code == 200
+
+
 def test_steps_routes_save_preview_and_answer_templates(api):
     api.post("/api/step-programs", json={"name": "fetch", "template": "empty"})
     tpl = api.post("/api/programs/fetch/steps/template", json={"template": "put_it_down", "point": "grasp-can"}).json()

@@ -11,9 +11,10 @@ import time
 import pytest
 
 from asibot import keys
+from asibot.testing import wait_until
 
 from .conftest import fresh_page, screenshot
-from .teach_flows import ROBOT, TASK, Actions, by_touch, can_position, reset, run_ends
+from .teach_flows import ROBOT, TASK, Actions, by_touch, can_position, can_side_pixel, reset, run_ends
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(400)]
 
@@ -62,3 +63,25 @@ def test_a_carer_teaches_the_red_can_by_touch_and_it_is_lifted_then_moved_3_cm(b
         assert "I looked for the red object" in output and "no red object" in output, output
         assert "Move above" not in output, output
         assert f"{TASK}: finished." not in said
+
+        # Taught again (the can put somewhere else): the page asks, by the button, whether to
+        # update the program the task runs; updated, the same task and program, no second one.
+        reset(kitchen)
+        moved = [start[0] - 0.06, start[1] + 0.08, start[2]]
+        kitchen.bus.call(keys.driver_rpc(ROBOT, "set_object_pose"), {"name": "red_can", "pos": moved}, timeout=5)
+        page.get_by_role("tab", name="Cartesian", exact=True).click()
+        picture = page.locator("img.camera-picture")
+        wait_until(lambda: picture.evaluate("i => i.complete && i.naturalWidth > 0"), timeout=15)
+        act.touch_picture(*can_side_pixel(kitchen), "the red can where it stands now")
+        page.get_by_role("button", name="Pick it up: make a task").click()
+        question = page.get_by_role("group", name="Update or make another")
+        question.wait_for(timeout=10000)
+        assert "A program already picks up the red object: pick_up_red_object, which “Give me the red can” runs" \
+            in question.inner_text(), question.inner_text()
+        screenshot(page, "teach-by-touch-again-asks")
+        question.get_by_role("button", name="Update it").click()
+        page.get_by_text("Updated pick_up_red_object: it picks up what you touched now, and so does “Give me the red "
+                         "can”.").wait_for(timeout=10000)
+        assert page.locator("#tab-cartesian[aria-selected=true]").is_visible(), "it left the Cartesian page"
+        programs = [p for p in kitchen.web("GET", "/api/programs")[1]["programs"] if p.startswith("pick_up")]
+        assert programs == ["pick_up_red_object"], programs

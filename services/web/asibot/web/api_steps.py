@@ -18,7 +18,7 @@ from pydantic import Field, StrictBool, StrictStr
 from asibot.web import steps as steplib
 from asibot.web.models import Strict
 from asibot.web.routing import web_of
-from asibot.web.userdata import NotFound, UserData, UserDataError
+from asibot.web.userdata import AlreadyExists, NotFound, UserData, UserDataError
 from asibot.web.userdata.names import quote
 
 router = APIRouter(prefix="/api")
@@ -50,6 +50,11 @@ class NewFromSteps(Strict):
     point: Name | None = None
     thing: dict | None = Field(None, description="Pick it up: a taught thing (name, colour, height, width, where: "
                                                  "asibot.things), looked for wherever it stands when the program runs")
+    if_exists: Literal["number", "ask", "replace"] = Field(
+        "number", description="when `name` is left out and the template's name for the point or thing is taken: "
+                              "number a new program after it (pick_up_red-can_2); ask (409, code exists: nothing "
+                              "is made); or replace that program's steps (teaching a thing again: every task that "
+                              "runs it picks up what was taught now; its earlier version is kept)")
 
 
 def _template(data: UserData, template: str, point: str | None, thing: dict | None = None) -> list[steplib.Step]:
@@ -117,7 +122,23 @@ def new_from_steps(body: NewFromSteps, request: Request) -> dict:
     data = web_of(request).data
     steps = _template(data, body.template, body.point, body.thing)
     named = body.thing.get("name") if body.thing is not None else body.point
-    name = body.name or steplib.program_name(body.template, named if isinstance(named, str) else None,
-                                             data.programs())
+    named = named if isinstance(named, str) else None
+    if body.name is None and body.if_exists != "number":
+        name = steplib.program_name(body.template, named, ())
+        if name in data.programs():
+            users = [t.name for t in data.tasks() if t.program == name]
+            if body.if_exists == "ask":
+                ran_by = f", which {_listed(users)} {'runs' if len(users) == 1 else 'run'}" if users else ""
+                raise AlreadyExists(f"A program already picks up the {named or 'point'}: {name}{ran_by}. Update it "
+                                    "with what you touched now, or make another.")
+            made = data.steps.save(name, steps, replace=True)
+            return _answer(data, name, made.steps, text=made.text, in_sync=True, points_changed=False,
+                           replaced=True, tasks=users)
+    name = body.name or steplib.program_name(body.template, named, data.programs())
     made = data.steps.save(name, steps, new=True)
-    return _answer(data, name, made.steps, text=made.text, in_sync=True, points_changed=False)
+    return _answer(data, name, made.steps, text=made.text, in_sync=True, points_changed=False, replaced=False, tasks=[])
+
+
+def _listed(names: list[str]) -> str:
+    quoted = [f"“{n}”" for n in names]
+    return quoted[0] if len(quoted) == 1 else ", ".join(quoted[:-1]) + " and " + quoted[-1]

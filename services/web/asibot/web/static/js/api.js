@@ -1,7 +1,11 @@
 // The page's link to the server: JSON over HTTP for actions, one WebSocket for live state.
 // Every refusal comes back as an Error whose message is the server's sentence.
 
-export class Refused extends Error {}
+export class Refused extends Error {
+  // `code`: the server's word for why (its "error": exists, not_found, ...), for a page that
+  // answers one refusal with a question rather than a message.
+  constructor(message, code = '') { super(message); this.code = code; }
+}
 
 // The server writes its session token into the page; another site's page cannot read it, so
 // it cannot send it (services/web/guard.py). A page from before a server restart reloads.
@@ -27,7 +31,7 @@ async function request(method, path, body, binary = false, tag = null) {
   if (binary && reply.status === 304) return { data: null, tag };
   if (binary && reply.ok) return { data: await reply.arrayBuffer(), tag: reply.headers.get('ETag') };
   const data = type.includes('application/json') ? await reply.json() : await reply.text();
-  if (!reply.ok) throw new Refused((data && data.message) || `The server answered ${reply.status}.`);
+  if (!reply.ok) throw new Refused((data && data.message) || `The server answered ${reply.status}.`, (data && data.error) || '');
   return data;
 }
 

@@ -93,7 +93,8 @@ export function confirmable(label, attrs, action, { ask = 'Sure? Touch again', n
 export async function attempt(action, success) {
   try {
     const result = await action();
-    if (success) notify(typeof success === 'function' ? success(result) : success, 'info');
+    const said = typeof success === 'function' ? success(result) : success;
+    if (said) notify(said, 'info');      // nothing to say: the action asked a question instead
     return result;
   } catch (e) {
     notify(e.message);

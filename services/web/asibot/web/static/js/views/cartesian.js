@@ -113,16 +113,44 @@ function touchResult(touched) {
   // and go on to the Assigner with that program chosen. A thing whose colour the camera cannot
   // tell is kept as a point, picked where it stands now.
   const thingName = () => name.value.trim() || (touched.colour ? `${touched.colour} object` : touched.name);
+  // Taught again, a thing already picked up by a program: the question, here by the button
+  // (update that program, so every task that runs it picks up what was touched now, or make
+  // another), never a second program made behind the carer's back.
+  const question = el('div', { class: 'ask-again', role: 'group', 'aria-label': 'Update or make another', hidden: true });
+  const made = (program) => {
+    question.hidden = true;
+    if (program.replaced && program.tasks.length) return program;       // its tasks run it already
+    remember('assigner.program', program.name);
+    location.hash = 'assigner';
+    return program;
+  };
+  const madeSays = (p) => (p.replaced
+    ? `Updated ${p.name}: it picks up what you touched now${p.tasks.length ? `, and so does ${p.tasks.map((t) => `“${t}”`).join(', ')}` : ''}.`
+    : `${p.name}: a program that picks it up, made of steps (see it on the Program page). Now name the task, give it words and an icon, and save it.`);
+  const ask = (thing, sentence) => {
+    const answer = (ifExists) => attempt(async () => made(await api.post(paths.stepPrograms, { template: 'pick_it_up', thing, if_exists: ifExists })), madeSays);
+    question.replaceChildren(
+      el('p', { role: 'status' }, sentence),
+      el('div', { class: 'row' },
+        el('button', { type: 'button', class: 'primary', onclick: () => answer('replace') }, 'Update it'),
+        el('button', { type: 'button', onclick: () => answer('number') }, 'Make another'),
+        el('button', { type: 'button', onclick: () => { question.hidden = true; } }, 'Cancel')));
+    question.hidden = false;
+    question.querySelector('button').focus();
+  };
   const pickItUp = el('button', {
     type: 'button', class: 'primary', hidden: !touched.reach.joints,
     onclick: () => attempt(async () => {
       const found = touched.found;
       if (found.kind === 'object' && touched.colour) {
         const thing = { name: thingName(), colour: touched.colour, height: found.height, width: found.width, where: found.centre };
-        const program = await api.post(paths.stepPrograms, { template: 'pick_it_up', thing });
-        remember('assigner.program', program.name);
-        location.hash = 'assigner';
-        return program;
+        try {
+          return made(await api.post(paths.stepPrograms, { template: 'pick_it_up', thing, if_exists: 'ask' }));
+        } catch (e) {
+          if (e.code !== 'exists') throw e;
+          ask(thing, e.message);
+          return null;
+        }
       }
       const body = { values: touched.reach.point };
       body.name = name.value.trim() || touched.name;
@@ -131,14 +159,14 @@ function touchResult(touched) {
       remember('assigner.program', program.name);
       location.hash = 'assigner';
       return program;
-    }, (p) => `${p.name}: a program that picks it up, made of steps (see it on the Program page). Now name the task, give it words and an icon, and save it.`),
+    }, (p) => (p ? madeSays(p) : null)),
   }, 'Pick it up: make a task');
   box.append(
     el('p', { class: 'touch-says' }, `You touched ${touched.says}.`),
     el('div', { class: 'row' }, OFFERS.map((o) => el('button', { type: 'button', dataset: { offer: o.key }, onclick: () => preview(o) }, o.label))),
     ...unreachable, confirm,
     el('div', { class: 'row' }, keepIt, el('label', {}, 'Name ', name)),
-    el('div', { class: 'row' }, pickItUp));
+    el('div', { class: 'row' }, pickItUp), question);
   return box;
 }
 
