@@ -115,7 +115,7 @@ def test_goto_a_place_arrives_and_goal_reached_comes_back_as_a_frame(stack):
     try:
         assert command(c, f"goto {SOFA}", timeout=15).startswith("ok")
         wait_until(lambda: "goal reached" in c.strings(1), 120, interval=0.5,
-                   message=f"no 'goal reached' frame; got {c.strings(1)}")
+                   message=lambda: f"no 'goal reached' frame; got {c.strings(1)}")
         assert moved(stack.truth.pose(), SOFA_POSE) < 0.3
         assert nc.encode_string(1, "goal reached") in c.bytes()
     finally:
@@ -157,7 +157,7 @@ def test_an_http_client_and_a_text_client_send_it_places_and_hear_goal_reached(s
     # ahead" (info) may follow "goal reached" within a scan, and be the last event then.
     wait_until(lambda: (lambda st: st["state"] == "succeeded" and st["place"] == HALL
                         and "arrived" in st["text"])(http_status(stack)), 120, interval=0.5,
-               message=f"/status never said it arrived: {http_status(stack)}")
+               message=lambda: f"/status never said it arrived: {http_status(stack)}")
     assert moved(stack.truth.pose(), HALL_POSE) < 0.3
     st = http_status(stack)
     assert st["robot"] == ROBOT and st["pose"] is not None and st["place"] == HALL
@@ -165,7 +165,7 @@ def test_an_http_client_and_a_text_client_send_it_places_and_hear_goal_reached(s
     try:
         assert say(t, f"goto {SOFA}", timeout=15).startswith("ok")
         wait_until(lambda: any("goal reached" in ln for ln in t.lines()), 120, interval=0.5,
-                   message=f"no 'goal reached' line; got {t.lines()}")
+                   message=lambda: f"no 'goal reached' line; got {t.lines()}")
         assert moved(stack.truth.pose(), SOFA_POSE) < 0.3
     finally:
         t.close()

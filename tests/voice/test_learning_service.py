@@ -31,7 +31,9 @@ def rig(memory_bus, speech, tmp_path, monkeypatch):
     r.close()
 
 
-def call(r: Rig, verb: str, request: dict, timeout: float = 20) -> dict:
+def call(r: Rig, verb: str, request: dict, timeout: float = 90) -> dict:
+    """A verb of the voice service; learning runs the phone recogniser (seconds of a core, more
+    beside a browser), so the deadline is generous."""
     return r.test_bus.call(keys.voice_rpc(verb), request, timeout=timeout)
 
 

@@ -290,7 +290,7 @@ def test_tasks_words_and_icons_round_trip_with_the_seed_files(api):
     api.post("/api/programs", json={"name": "can_task"})
     assert api.post("/api/words", json={"text": "give me the red can"}).status_code == 200
     task = api.put("/api/tasks/Red can", json={"program": "can_task", "words": ["give me the red can"], "icon": "can.svg"}).json()
-    assert task == {"name": "Red can", "program": "can_task", "words": ["give me the red can"], "icon": "can.svg"}
+    assert task == {"name": "Red can", "program": "can_task", "words": ["give me the red can"], "icon": "can.svg", "robot": ""}
     icons = [i["name"] for i in api.get("/api/icons").json()["icons"]]
     assert {"drink.svg", "can.svg", "face.svg", "teeth.svg", "home.svg", "stop.svg"} <= set(icons)
     exported = api.get("/api/export.zip")
@@ -326,7 +326,7 @@ def test_other_services_launch_a_task_on_the_bus_and_hear_how_it_ended(web, api)
     other.subscribe(keys.events(ROBOT), Event, heard)
     try:
         listed = other.call(keys.tasks_rpc("list"), {}, timeout=5)["tasks"]
-        assert {"name": "Hello", "program": "say_hello", "words": []} in listed
+        assert {"name": "Hello", "program": "say_hello", "words": [], "robot": ""} in listed
         for bad, code, words in (({"task": "Nope", "robot": ROBOT}, "bad_request", "no task named"),
                                  ({"task": "Hello", "robot": "ghost"}, "unavailable", "not connected"),
                                  ({"task": 5, "robot": ROBOT}, "bad_request", "'task' must be a task name"),
@@ -342,6 +342,35 @@ def test_other_services_launch_a_task_on_the_bus_and_hear_how_it_ended(web, api)
         assert other.call(keys.tasks_rpc("status"), {}, timeout=5)["last"]["ok"] is True
     finally:
         other.close()
+
+
+def test_a_task_runs_on_its_own_robot_whatever_robot_launches_it(web, api):
+    """Issue 54: a task taught on one robot runs there from every tile, word and bridge command,
+    whatever the page commands; a task of the original ASIBOT (no robot) runs where it is sent."""
+    from asibot.errors import RpcError
+    client, svc, driver, server = web
+    api.put("/api/programs/say_where", json={"text": "import sys\nprint('on', sys.argv[1])\n"})
+    made = api.put("/api/tasks/Here", json={"program": "say_where", "words": [], "icon": "face.svg", "robot": ROBOT})
+    assert made.status_code == 200 and made.json()["robot"] == ROBOT, made.text
+    assert (svc.web.data.root / "Here.task").read_text() == f"say_where\n\nface.svg\n{ROBOT}\n"
+    other = Bus("bridge")
+    try:
+        reply = other.call(keys.tasks_rpc("launch"), {"task": "Here", "robot": "the-other-arm"}, timeout=5)
+        assert reply["robot"] == ROBOT, reply
+        wait_until(lambda: (svc.web.runner.status().get("last") or {}).get("program") == "Here", timeout=20)
+        assert svc.web.runner.status()["last"]["robot"] == ROBOT
+        # Its robot gone, it is refused rather than run elsewhere.
+        api.put("/api/tasks/Elsewhere", json={"program": "say_where", "words": [], "icon": "face.svg", "robot": "ghost"})
+        with pytest.raises(RpcError, match="Elsewhere runs on ghost, which is not connected"):
+            other.call(keys.tasks_rpc("launch"), {"task": "Elsewhere", "robot": ROBOT}, timeout=5)
+        refused = api.post("/api/tasks/Elsewhere/launch", json={"robot": ROBOT})
+        assert refused.status_code == 503 and "runs on ghost" in refused.json()["message"], refused.text
+    finally:
+        other.close()
+    bad = api.put("/api/tasks/Bad", json={"program": "say_where", "words": [], "icon": "face.svg", "robot": "../x"})
+    assert bad.status_code == 422 and "Bad" not in [t["name"] for t in api.get("/api/tasks").json()["tasks"]]
+    for name in ("Here", "Elsewhere"):
+        api.delete(f"/api/tasks/{name}")
 
 
 def test_the_voice_setting_without_the_voice_service_says_how_to_start_it(api):

@@ -135,7 +135,7 @@ def test_home_lists_the_tasks_by_use_and_the_carer_can_order_them(web):
         wait_until(lambda: not svc.web.runner.status()["running"], timeout=20)
         assert names() == ["Beta", "Alpha"]                       # Beta was launched once
         beta = next(i for i in client.get("/api/favourites").json()["items"] if i["name"] == "Beta")
-        assert beta == {"key": "task:Beta", "kind": "task", "name": "Beta", "icon": "face.svg", "uses": 1}
+        assert beta == {"key": "task:Beta", "kind": "task", "name": "Beta", "icon": "face.svg", "robot": "", "uses": 1}
         reply = client.put("/api/favourites/order", json={"order": ["task:Alpha"]})
         assert reply.status_code == 200 and reply.json()["order"] == ["task:Alpha"]
         assert names() == ["Alpha", "Beta"]                       # the carer's order first

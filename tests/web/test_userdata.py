@@ -300,6 +300,21 @@ def test_tasks_round_trip(data):
     refused(data, NotFound, data.delete_task, "home")
 
 
+def test_a_task_keeps_its_robot_in_a_fourth_line(data):
+    """Ours name the robot a task runs on; the original ASIBOT's 3 lines still load (no robot)."""
+    data.save_program("fetch_can", "pass\n")
+    task = data.save_task("Give me the red can", "fetch_can", [], "can.svg", "asibot-sim")
+    assert task.robot == "asibot-sim" and data.task("Give me the red can") == task
+    assert (data.root / "Give me the red can.task").read_text() == "fetch_can\n\ncan.svg\nasibot-sim\n"
+    (data.root / "old.task").write_text("fetch_can\ncan\ncan.svg\n")
+    assert data.task("old").robot == ""
+    data.rename_program("fetch_can", "can")
+    assert data.task("Give me the red can").robot == "asibot-sim"          # kept when it follows its program
+    assert "robot" in refused(data, UserDataError, data.save_task, "t", "can", [], "can.svg", "a/b")
+    (data.root / "broken.task").write_text("can\n\ncan.svg\nno such/robot\n")
+    assert "robot" in refused(data, UserDataError, data.task, "broken")
+
+
 def test_task_refusals(data):
     data.save_program("p", "pass\n")
     data.save_task("t", "p", ["w"], "drink.svg")
@@ -324,6 +339,8 @@ def test_a_broken_task_file_is_left_out(data):
     (data.root / "broken.task").write_text("p\n")
     assert [t.name for t in data.tasks()] == ["good"]
     assert "3 lines" in refused(data, UserDataError, data.task, "broken")
+    (data.root / "broken.task").write_text("p\n\nhome.svg\nasibot-sim\nmore\n")
+    assert "may have a 4th" in refused(data, UserDataError, data.task, "broken")
 
 
 # ------------------------------------------------------------------------------------- icons

@@ -11,6 +11,8 @@ from typing import Callable
 import re
 
 _NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]*$")
+#: A robot id as the page, the API and the user's files accept it: a key chunk of 1 to 64 characters.
+ROBOT_ID_PATTERN = r"[A-Za-z0-9_][A-Za-z0-9_.\-]{0,63}"
 
 RPC_VERBS_CART = (
     "stat", "inv", "fwd", "movj", "movl", "movv", "movjv", "relj", "stop", "wait", "tool", "act",

@@ -52,7 +52,8 @@ def _places(request: Request) -> tuple[list[dict], list[str]]:
 
 def favourites(request: Request) -> dict:
     web = web_of(request)
-    items = [{"key": task_key(t.name), "kind": "task", "name": t.name, "icon": t.icon} for t in web.data.tasks()]
+    items = [{"key": task_key(t.name), "kind": "task", "name": t.name, "icon": t.icon, "robot": t.robot}
+             for t in web.data.tasks()]
     places, notes = _places(request)
     items += places
     usage = web.data.favourites.read()

@@ -15,6 +15,7 @@ from fastapi import APIRouter, File, Request, Response, UploadFile
 from fastapi.responses import FileResponse
 from pydantic import Field, StrictInt, StrictStr
 
+from asibot import keys
 from asibot.errors import RpcError
 from asibot.messages import LISTEN_SECONDS, MAX_LISTEN_SECONDS, MIN_LISTEN_SECONDS
 from asibot.web import reference
@@ -80,6 +81,9 @@ class TaskBody(Strict):
     program: Name
     words: Annotated[list[Name], Field(max_length=20)] = []
     icon: Name
+    robot: Annotated[str, Field(pattern=f"^{keys.ROBOT_ID_PATTERN}$")] | None = Field(
+        None, description="the robot the task runs on, whatever the page commands when it is launched; "
+                          "left out: whichever robot launches it (a task of the original ASIBOT)")
 
 
 def _as_json(obj) -> dict:
@@ -276,7 +280,7 @@ def tasks(request: Request) -> dict:
 
 @router.put("/tasks/{name}", summary="create or change a task: program + words + icon")
 def save_task(name: str, body: TaskBody, request: Request) -> dict:
-    return _as_json(web_of(request).data.save_task(name, body.program, body.words, body.icon))
+    return _as_json(web_of(request).data.save_task(name, body.program, body.words, body.icon, body.robot or ""))
 
 
 @router.delete("/tasks/{name}", summary="delete a task")
@@ -285,10 +289,10 @@ def delete_task(name: str, request: Request) -> dict:
     return {}
 
 
-@router.post("/tasks/{name}/launch", summary="launch a task's program on a robot")
+@router.post("/tasks/{name}/launch", summary="launch a task's program: on its own robot, else on `robot`")
 def launch(name: str, body: Run, request: Request) -> dict:
     web = web_of(request)
-    web.tasks.launch(name, known(web, body.robot))
+    web.tasks.launch(name, body.robot)
     return web.runner.status()
 
 

@@ -14,9 +14,10 @@ from fastapi import Path
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, StrictFloat, StrictInt
 from pydantic_core import PydanticCustomError
 
+from asibot import keys
 from asibot.jog import SPEED_LEVELS
 
-RobotId = Annotated[str, Path(pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.\-]{0,63}$",
+RobotId = Annotated[str, Path(pattern=f"^{keys.ROBOT_ID_PATTERN}$",
                               description="a robot id as the Connection Manager lists it")]
 Level = Annotated[StrictInt, Field(ge=1, le=len(SPEED_LEVELS), description="speed level, 1 (slowest) to 5")]
 # JSON's `true` is not the number 1 here.

@@ -27,10 +27,12 @@ log = logging.getLogger("asibot.web.tasks")
 #: The verbs of `keys.tasks_rpc`. Whether the task exists and the robot is live are the
 #: desk's checks, with their own sentences.
 VERBS = {
-    "list": Verb(doc="the Task Creator's tasks: name, program and the words that launch each"),
+    "list": Verb(doc="the Task Creator's tasks: name, program, the words that launch each and the robot it "
+                     "runs on (\"\": the one that launches it)"),
     "launch": Verb({"task": Field(Text("a task name", longest=MAX_NAME), required=True),
                     "robot": Field(Text("a robot id"), required=True)},
-                   doc="start a task's program on a live robot, as the Launcher's button does"),
+                   doc="start a task's program on its own robot (`robot` for a task that names none), "
+                       "as the Launcher's button does"),
     "stop": Verb(doc="stop the running program"),
     "status": Verb(doc="the running program, and how the last one ended"),
 }
@@ -49,10 +51,15 @@ class TaskDesk:
                                                  "stop": self._stop, "status": self._status})
 
     def launch(self, name: str, robot: str) -> dict:
-        """Start task `name` on `robot` (the Launcher's button does the same)."""
-        if not self.is_live(robot):
-            raise RpcError("unavailable", f"Robot {robot!r} is not connected; start it with `asibot up`.")
+        """Start task `name` on its own robot, or on `robot` for a task that names none (the
+        Launcher's button, a tile, a word and the bridge all come here): a task taught on the
+        kitchen arm never runs on the Pioneer because the page commanded it at the time."""
         task = self.data.task(name)
+        robot = task.robot or robot
+        if not self.is_live(robot):
+            raise RpcError("unavailable", f"{task.name} runs on {robot}, which is not connected; start it with "
+                                          "`asibot up`." if task.robot else
+                                          f"Robot {robot!r} is not connected; start it with `asibot up`.")
         path = self.data.program_file(task.program)
         try:
             self.runner.start(path, robot, name=task.name)
@@ -79,7 +86,7 @@ class TaskDesk:
 
     # --- the RPC verbs ---------------------------------------------------------------------
     def _list(self, a: Any) -> dict:
-        return {"tasks": [{"name": t.name, "program": t.program, "words": list(t.words)}
+        return {"tasks": [{"name": t.name, "program": t.program, "words": list(t.words), "robot": t.robot}
                           for t in self.data.tasks()]}
 
     def _launch(self, a: Any) -> dict:

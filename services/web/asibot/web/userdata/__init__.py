@@ -209,16 +209,17 @@ class UserData:
         return self.task_files.get(name)
 
     @_locked
-    def save_task(self, name: str, program: str, words: list[str], icon: str) -> Task:
+    def save_task(self, name: str, program: str, words: list[str], icon: str, robot: str = "") -> Task:
         """Create or replace a task; its program and icon must exist, and its words are
-        recorded too so the Speech tab lists them."""
+        recorded too so the Speech tab lists them. `robot`: the robot it runs on, "" for
+        whichever launches it."""
         path = self.task_files.path(name)
         if not self.program_files.path(program).is_file():
             raise NotFound(f"There is no program named {quote(program)} for the task.")
         words = check_task_words(words)
         self.icon_files.file(icon)
         self.word_file.add_new(words)
-        return self.task_files.write(path, program, words, icon)
+        return self.task_files.write(path, program, words, icon, robot)
 
     @_locked
     def delete_task(self, name: str) -> None:

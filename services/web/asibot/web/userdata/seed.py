@@ -206,7 +206,7 @@ def _import(data: UserData, files: dict[str, bytes | None]) -> ImportReport:
         try:
             t = parse_task(check_task_name(name[:-5]), text_of(name))
             icon = SEED_ICONS.get(t.icon.lower()) or icon_names.get(t.icon) or t.icon
-            data.save_task(t.name, t.program, t.words, icon)
+            data.save_task(t.name, t.program, t.words, icon, t.robot)
             report.imported.append(f"task {t.name}")
             if icon != t.icon:
                 report.notes.append(f"The task {t.name} shows {icon} for the seed's {t.icon}.")

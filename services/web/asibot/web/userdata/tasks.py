@@ -1,12 +1,16 @@
 """Tasks, what the Launcher shows as buttons: `<task>.task`, 3 lines: the program (no .py), its
-words (several joined by ";") and its icon's file name."""
+words (several joined by ";") and its icon's file name; ours add a 4th, the robot the task runs
+on (a task taught on the kitchen arm runs there whatever the page commands: issue 54). A task
+of the original ASIBOT's 3 lines runs on the robot that launches it."""
 
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
+from asibot import keys
 from asibot.files import fsync_dir, write_atomic
 from asibot.web.userdata.errors import NotFound, UserDataError
 from asibot.web.userdata.folder import Folder, decode, log
@@ -14,6 +18,7 @@ from asibot.web.userdata.names import CONTROL_RE, need_str, quote
 from asibot.web.userdata.words import check_word
 
 MAX_TASK_BYTES = 4096
+ROBOT_RE = re.compile(keys.ROBOT_ID_PATTERN)
 
 
 @dataclass
@@ -24,6 +29,7 @@ class Task:
     program: str
     words: list[str]
     icon: str
+    robot: str = ""         # "" (the original's 3 lines): whichever robot launches it
 
 
 def check_task_name(name: object) -> str:
@@ -49,16 +55,26 @@ def parse_task(name: str, text: str) -> Task:
     lines = text.splitlines()
     while lines and not lines[-1].strip():
         lines.pop()
-    if len(lines) != 3:
+    if len(lines) not in (3, 4):
         raise UserDataError(f"The task file {quote(name + '.task')} must have 3 lines "
-                            f"(program, words, icon); it has {len(lines)}.")
+                            f"(program, words, icon) and may have a 4th (its robot); it has {len(lines)}.")
     program = lines[0].strip().removesuffix(".py")
     words = [w.strip() for w in lines[1].split(";") if w.strip()]
-    return Task(name, program, words, lines[2].strip())
+    robot = check_task_robot(lines[3].strip()) if len(lines) == 4 else ""
+    return Task(name, program, words, lines[2].strip(), robot)
 
 
-def task_text(program: str, words: list[str], icon: str) -> bytes:
-    return f"{program}\n{';'.join(words)}\n{icon}\n".encode()
+def check_task_robot(robot: object) -> str:
+    """A task's robot: a robot id ("" for whichever launches it)."""
+    if robot == "":
+        return ""
+    if not isinstance(robot, str) or not ROBOT_RE.fullmatch(robot):
+        raise UserDataError(f"The task's robot {quote(robot)} is not a robot id (letters, digits, - _ .).")
+    return robot
+
+
+def task_text(program: str, words: list[str], icon: str, robot: str = "") -> bytes:
+    return (f"{program}\n{';'.join(words)}\n{icon}\n" + (f"{robot}\n" if robot else "")).encode()
 
 
 class Tasks:
@@ -87,20 +103,20 @@ class Tasks:
             raise NotFound(f"There is no task named {quote(name)}.")
         return parse_task(path.stem, decode(path.read_bytes())[0])
 
-    def write(self, path: Path, program: str, words: list[str], icon: str) -> Task:
+    def write(self, path: Path, program: str, words: list[str], icon: str, robot: str = "") -> Task:
         """Write the task at `path` (`path(name)`: its name checked) as it is given, if the
         folder has room for it."""
-        body = task_text(program, words, icon)
+        body = task_text(program, words, icon, check_task_robot(robot))
         old = path.stat().st_size if path.is_file() else None
         self.folder.room_for("task", len(body) - (old or 0), new=old is None)
         write_atomic(path, body)
-        return Task(path.stem, program, words, icon)
+        return Task(path.stem, program, words, icon, robot)
 
     def follow_program(self, old: str, new: str) -> None:
         """The tasks that ran program `old` run `new`, renamed from it."""
         for t in self.all():  # rewritten as they are: a task whose icon went stays as it was
             if t.program == old:
-                write_atomic(self.path(t.name), task_text(new, t.words, t.icon))
+                write_atomic(self.path(t.name), task_text(new, t.words, t.icon, t.robot))
 
     def delete(self, name: str) -> None:
         """Move a task to the trash."""

@@ -88,7 +88,7 @@ export function favouritesPanel() {
   const notes = el('div', { class: 'muted' });
   const now = nowPanel();
   // No message on success: "Now" says it, beside the tiles, and nothing on the page moves.
-  const launch = (item) => attemptOn(state.chosen, async (robot) => {
+  const launch = (item) => attemptOn(item.robot || state.chosen, async (robot) => {   // its own robot first
     const status = await api.post(paths.launchTask(item.name), { robot });
     now.task(robot, item.name);
     now.run(status);

@@ -1,6 +1,6 @@
 // Assigner tab: program + words + icon -> a task, the button the Launcher shows. The task being
 // made (name, program, words, icon) is kept across tab switches and reloads (keep.js).
-import { api, paths } from '../api.js';
+import { api, paths, state } from '../api.js';
 import { kept, recall, remember, setKept } from '../keep.js';
 import { attempt, confirmable, el, notify } from '../ui.js';
 
@@ -19,6 +19,16 @@ export default {
     let taskNames = [];
     let editing = null;     // the task whose Edit filled the form: saving it again replaces it without asking
     const program = kept('assigner.program', el('select', { 'aria-label': 'Program' }));
+    // The robot the task runs on, whatever the page commands when it is launched (a tile, a
+    // word or the bridge): the one commanded now, unless the carer chooses another.
+    const robot = kept('assigner.robot', el('select', { 'aria-label': 'Runs on' }));
+    const ANY = '';
+    const robotOptions = (want) => {
+      const ids = [...new Set([...state.robots.keys(), ...(want ? [want] : [])])].sort();
+      robot.replaceChildren(...ids.map((id) => el('option', { value: id }, id)),
+        el('option', { value: ANY }, 'whichever is commanded'));
+      robot.value = want !== undefined && want !== null ? want : (state.chosen || ANY);
+    };
     const words = el('div', { class: 'chips', role: 'group', 'aria-label': 'Words that launch it' });
     const icons = el('div', { class: 'icons', role: 'radiogroup', 'aria-label': 'Icon' });
     const tasks = el('ul', { class: 'points', 'aria-label': 'Tasks' });
@@ -67,15 +77,17 @@ export default {
         type: 'button', role: 'radio', 'aria-checked': String(x.name === icon),
         'aria-label': `Icon ${x.name.replace(/\.[a-z]+$/, '')}`, dataset: { icon: x.name }, onclick: () => pickIcon(x.name),
       }, el('img', { src: paths.icon(x.name), alt: '' }))));
+      robotOptions(robot.options.length ? robot.value : recall('assigner.robot'));   // the robots live now
       taskNames = t.tasks.map((x) => x.name);
       tasks.replaceChildren(...(t.tasks.length ? t.tasks.map((x) => el('li', {},
         el('img', { src: paths.icon(x.icon), alt: '', width: '48', height: '48' }),
         el('span', { class: 'pname' }, x.name),
-        el('span', { class: 'pvals' }, `${x.program}.py${x.words.length ? ` · "${x.words.join('", "')}"` : ''}`),
+        el('span', { class: 'pvals' }, `${x.program}.py${x.robot ? ` on ${x.robot}` : ''}${x.words.length ? ` · "${x.words.join('", "')}"` : ''}`),
         el('button', {
           type: 'button', 'aria-label': `Edit ${x.name}`, onclick: () => {
             editing = x.name;
-            setKept(name, x.name); setKept(program, x.program); chosenWords = new Set(x.words);
+            setKept(name, x.name); setKept(program, x.program); robotOptions(x.robot); setKept(robot, x.robot);
+            chosenWords = new Set(x.words);
             remember('assigner.words', [...chosenWords]); pickIcon(x.icon); refresh();
           },
         }, 'Edit'),
@@ -85,7 +97,7 @@ export default {
           await refresh();
           notify(`Task "${x.name}" deleted.`, 'info', {
             label: 'Undo', run: () => attempt(async () => {
-              await api.put(paths.task(x.name), { program: x.program, words: x.words, icon: x.icon });
+              await api.put(paths.task(x.name), { program: x.program, words: x.words, icon: x.icon, robot: x.robot || null });
               await refresh();
             }, `Task "${x.name}" is back.`),
           });
@@ -100,11 +112,11 @@ export default {
       }
       attempt(async () => {
         if (!icon) throw new Error('Choose an icon for the task.');
-        const r = await api.put(paths.task(typed), { program: program.value, words: [...chosenWords], icon });
+        const r = await api.put(paths.task(typed), { program: program.value, words: [...chosenWords], icon, robot: robot.value || null });
         editing = r.name;
         await refresh();
         return r;
-      }, (r) => `Task "${r.name}" saved: it is on the Launcher.`);
+      }, (r) => `Task "${r.name}" saved: it is on the Launcher${r.robot ? `, and runs on ${r.robot}` : ''}.`);
     };
     // Saving under the name of another task replaces it: the button asks first.
     const saveButton = confirmable('Save task', { class: 'primary big' }, save, {
@@ -124,6 +136,7 @@ export default {
         el('h2', {}, 'Make a task'),
         el('div', { class: 'row' }, el('label', {}, 'Task name ', name)), nameError,
         el('div', { class: 'row' }, el('label', {}, 'Program ', program)),
+        el('div', { class: 'row' }, el('label', {}, 'Runs on ', robot)),
         el('h3', {}, 'Words that launch it'), words,
         el('div', { class: 'row' }, el('label', {}, 'New word ', newWord),
           el('button', { type: 'button', onclick: addWord }, 'Add and choose it')),

@@ -13,7 +13,7 @@ export default {
       const { tasks } = await api.get(paths.tasks);
       grid.replaceChildren(...(tasks.length ? tasks.map((t) => el('button', {
         type: 'button', class: 'task-button', 'aria-label': `Launch ${t.name}`,
-        onclick: () => attemptOn(state.chosen, async (robot) => {
+        onclick: () => attemptOn(t.robot || state.chosen, async (robot) => {      // its own robot first
           output.clear();
           const status = await api.post(paths.launchTask(t.name), { robot });
           output.show(status);

@@ -204,6 +204,9 @@ export default {
       extensions: [basicSetup, py, py.language.data.of({ autocomplete: completeClients }),
         keymap.of([{ key: 'Mod-s', preventDefault: true, run: () => { save(); return true; } }]),
         EditorView.updateListener.of((u) => { if (u.docChanged) keepDraft(); }),
+        // Long lines wrap: beside the stop's column, or on a tablet, the editor never scrolls
+        // sideways (a sideways scroll a keyboard user cannot reach, and half a line hidden).
+        EditorView.lineWrapping,
         EditorView.contentAttributes.of({ 'aria-label': 'Program text' })],
     });
     // Show `t`, with `savedText` the program's text on the server; the cursor stays when the
