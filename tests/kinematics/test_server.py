@@ -38,6 +38,9 @@ def test_movj_then_wait_reaches_target(client):
     assert np.allclose(state["joints"], [20, 10, 20, 30, 5], atol=0.2)
 
 
+# Measured on the arm as it moves: an ideal driver starved beside a browser lags joint by joint
+# (each at its own max speed) and left the line by 9 mm once in CI; with the robots (tests/run).
+@pytest.mark.realtime
 def test_movl_moves_in_a_straight_line(client):
     client.movj(joints=[0, 30, 40, 30, 0], duration=0.5)
     client.wait(timeout=5)
