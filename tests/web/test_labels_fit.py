@@ -140,15 +140,10 @@ MEASURE = r"""(where) => {
     const r = n.getBoundingClientRect();
     if (r.width < 44 || r.height < 44) say(n, `a target of ${size(r)}, under 44 px`);
   }
-  const stop = document.querySelector('.estop-box');
+  const stop = document.querySelector('.estop-box');    // its whole space: the column or the bar
   const over = (n) => {
-    const r = n.getBoundingClientRect();
-    return [...stop.children].filter(shown).some((c) => {
-      const b = c.getBoundingClientRect();
-      return r.left < b.right - 1 && r.right > b.left + 1 && r.top < b.bottom - 1 && r.bottom > b.top + 1;
-    }) || (() => { const b = stop.getBoundingClientRect();
-      return getComputedStyle(stop).backgroundColor !== 'rgba(0, 0, 0, 0)'
-        && r.left < b.right - 1 && r.right > b.left + 1 && r.top < b.bottom - 1 && r.bottom > b.top + 1; })();
+    const r = n.getBoundingClientRect(), b = stop.getBoundingClientRect();
+    return r.left < b.right - 1 && r.right > b.left + 1 && r.top < b.bottom - 1 && r.bottom > b.top + 1;
   };
   const news = `${CONTROLS}, input, textarea, [role=status], [role=alert], .notice, .result, .now`;
   const scrolled = [window.scrollX, window.scrollY];

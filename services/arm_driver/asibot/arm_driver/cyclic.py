@@ -196,7 +196,6 @@ class SyncedFrames:
         self.syncs = 0
         self.late = 0               # SYNCs that found no new sample: the loop was late
         self.longest_late = 0       # the most in a row
-        self.shortest_gap = 0.0     # s, the shortest time between two SYNCs sent
         self._others = PeriodicFrames(bus)
         self._send = send
         self._lock = threading.Lock()
@@ -278,7 +277,6 @@ class SyncedFrames:
 
     def _run(self, stop: threading.Event) -> None:
         due = time.monotonic()
-        last: float | None = None
         while True:
             wait = due - time.monotonic()
             if stop.wait(wait) if wait > 0 else stop.is_set():
@@ -291,10 +289,6 @@ class SyncedFrames:
                 self._send(SYNC_COB_ID, b"")
             except (can.CanError, OSError) as exc:
                 self.error = str(exc) or type(exc).__name__     # the control loop reports it
-            if last is not None:
-                gap = sent - last
-                self.shortest_gap = gap if self.syncs == 1 else min(self.shortest_gap, gap)
-            last = sent
             self.syncs += 1
             due = max(due + self.period, sent + MIN_GAP * self.period)
 
